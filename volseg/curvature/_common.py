@@ -1,0 +1,55 @@
+"""Shared front-door checks for the curvature operators."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .. import mesh as _mesh
+
+OPERATORS = ("weighted", "unweighted", "laplace_beltrami", "intrinsic")
+_ALIASES = {
+    "laplace-beltrami": "laplace_beltrami",
+    "lb": "laplace_beltrami",
+    "cotangent": "laplace_beltrami",
+    "distortion": "unweighted",
+}
+
+
+def normalize_operator(operator: str) -> str:
+    """Canonical operator name; accepts hyphens and a few aliases."""
+    name = _ALIASES.get(str(operator).lower(), str(operator).lower())
+    if name not in OPERATORS:
+        raise ValueError(f"unknown `operator` {operator!r}; choose one of {', '.join(OPERATORS)}")
+    return name
+
+
+def edge_gram(edges: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(S, k, k) Gram matrices E E^T of stacked edge vectors."""
+    return edges @ edges.transpose(0, 2, 1)
+
+
+def check_nondegenerate(edges, simplices, volumes) -> None:
+    """Refuse simplices whose n-volume is zero relative to their edge lengths."""
+    n = simplices.shape[1] - 1
+    scale = np.sqrt(np.einsum("sij,sij->si", edges, edges).max(axis=1)) ** n / math.factorial(n)
+    flat = volumes <= 1e-12 * scale
+    if flat.any():
+        first = int(np.flatnonzero(flat)[0])
+        raise ValueError(
+            f"{int(flat.sum())} simplices have zero volume (first: simplex {first} = "
+            f"{simplices[first].tolist()}); curvature is undefined on degenerate simplices"
+        )
+
+
+def require_consistent(faces: _mesh.Faces) -> None:
+    if not faces.consistent.all():
+        bad = int(np.flatnonzero(~faces.consistent)[0])
+        pair = faces.simplices[bad].tolist()
+        raise ValueError(
+            f"the mesh is not consistently oriented (simplices {pair[0]} and {pair[1]} induce "
+            f"the same orientation on face {faces.vertices[bad].tolist()}); "
+            "re-orient it with volseg.mesh.orient"
+        )
