@@ -1,0 +1,79 @@
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+
+from tests.conftest import smooth_random_field
+from volseg import Volume, tessellation
+from volseg.curvature import default_value_scale, grid_curvature, vertex_curvature
+
+ALL = ["weighted", "unweighted", "laplace_beltrami", "intrinsic"]
+INNER = (slice(1, -1),) * 3
+
+
+@pytest.mark.parametrize("operator", ALL)
+@pytest.mark.parametrize("spacing, scale", [((1, 1, 1), 1.0), ((0.7, 1.0, 1.3), 0.4)])
+def test_grid_equals_explicit_mesh_at_interior_voxels(operator, spacing, scale, rng):
+    f = 3 * smooth_random_field((9, 10, 11), rng, sigma=1.5)
+    v, t = tessellation.kuhn_grid_mesh(f, spacing=spacing, value_scale=scale)
+    mesh_h = vertex_curvature(v, t, operator).reshape(f.shape)[INNER]
+    grid_h = grid_curvature(f, operator, spacing=spacing, value_scale=scale)[INNER]
+    assert_allclose(grid_h, mesh_h, rtol=1e-10, atol=1e-10 * np.abs(mesh_h).max())
+
+
+@pytest.mark.parametrize("operator", ALL)
+@pytest.mark.parametrize("boundary", ["linear", "mirror"])
+def test_every_voxel_is_finite(operator, boundary, rng):
+    f = smooth_random_field((6, 7, 5), rng)
+    assert np.isfinite(grid_curvature(f, operator, boundary=boundary)).all()
+
+
+@pytest.mark.parametrize("operator", ALL)
+def test_linear_padding_keeps_a_plane_flat_up_to_the_boundary(operator):
+    x, y, z = np.meshgrid(*[np.arange(6.0)] * 3, indexing="ij")
+    h = grid_curvature(0.3 * x - 0.2 * y + 0.7 * z + 2, operator, value_scale=1.0)
+    assert_allclose(h, 0, atol=1e-12)
+
+
+def test_mirror_padding_treats_the_boundary_as_a_symmetry_plane():
+    # A field symmetric about x = 0, cut there: mirror padding at x = 0 reproduces
+    # the full field's values on the cut plane.
+    x, y, z = np.meshgrid(np.arange(-6.0, 7), np.arange(7.0), np.arange(7.0), indexing="ij")
+    f = np.exp(-0.05 * (x**2 + (y - 3) ** 2 + (z - 3) ** 2))
+    full = grid_curvature(f, spacing=(1, 1, 1), value_scale=4.0, boundary="mirror")
+    half = grid_curvature(f[6:], spacing=(1, 1, 1), value_scale=4.0, boundary="mirror")
+    # Not identical: the Kuhn split is not mirror-symmetric. Close on the cut plane.
+    assert_allclose(half[0, 1:-1, 1:-1], full[6, 1:-1, 1:-1], rtol=0.15, atol=0.01)
+
+
+def test_peak_is_positive_h_matches_exact_value():
+    x, y, z = np.meshgrid(*[np.linspace(-1, 1, 33)] * 3, indexing="ij")
+    h = grid_curvature(-0.4 * (x**2 + y**2 + z**2), spacing=(1 / 16,) * 3, value_scale=1.0)
+    assert_allclose(h[16, 16, 16], 0.8, rtol=1e-2)
+
+
+def test_default_value_scale_makes_the_result_unit_free(rng):
+    f = smooth_random_field((8, 8, 8), rng)
+    assert_allclose(grid_curvature(1000 * f + 7), grid_curvature(f), rtol=1e-9, atol=1e-12)
+    assert default_value_scale(np.zeros((3, 3, 3))) == 1.0
+    assert_allclose(default_value_scale(np.array([[[0, 2]] * 2] * 2)), 0.5)
+
+
+def test_volume_spacing_is_used(rng):
+    f = smooth_random_field((6, 6, 6), rng)
+    volume = Volume(f, spacing=(2.0, 1.0, 0.5))
+    assert_allclose(grid_curvature(volume), grid_curvature(f, spacing=(2.0, 1.0, 0.5)))
+
+
+def test_grid_errors():
+    with pytest.raises(ValueError, match="must be 3-D"):
+        grid_curvature(np.zeros((4, 4)))
+    with pytest.raises(ValueError, match="at least 2 samples"):
+        grid_curvature(np.zeros((4, 4, 1)))
+    with pytest.raises(ValueError, match="non-finite"):
+        grid_curvature(np.full((3, 3, 3), np.inf))
+    with pytest.raises(ValueError, match="`spacing` must be three positive"):
+        grid_curvature(np.zeros((3, 3, 3)), spacing=(1, 0, 1))
+    with pytest.raises(ValueError, match="`value_scale` must be a positive"):
+        grid_curvature(np.zeros((3, 3, 3)), value_scale=-1)
+    with pytest.raises(ValueError, match="unknown `boundary`"):
+        grid_curvature(np.zeros((3, 3, 3)), boundary="wrap")
