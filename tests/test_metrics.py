@@ -1,0 +1,52 @@
+import numpy as np
+import pytest
+
+from volseg.metrics import (contingency_table, directional_hamming, hamming_similarity,
+                            region_ratio, variation_of_information)
+
+
+def brute_force_directional(a, b):
+    total = 0
+    for j in np.unique(b):
+        in_j = b == j
+        total += max(np.sum(in_j & (a == i)) for i in np.unique(a))
+    return a.size - total
+
+
+def test_hand_computed_example():
+    a = np.array([0, 0, 0, 1, 1, 1, 2, 2])
+    b = np.array([5, 5, 7, 7, 7, 7, 7, 9])
+    # B's regions: {0,1} -> best overlap 2; {2..6} -> best 3 (A=1); {7} -> 1. D(A=>B) = 8-6.
+    assert directional_hamming(a, b) == 2
+    # A's regions: {0,1,2} -> 2 (B=5); {3,4,5} -> 3; {6,7} -> 1. D(B=>A) = 8-6.
+    assert directional_hamming(b, a) == 2
+    assert hamming_similarity(a, b) == pytest.approx(1 - 4 / 16)
+    assert region_ratio(a, b) == 1.0
+    assert contingency_table(a, b).toarray().tolist() == [[2, 1, 0], [0, 3, 0], [0, 1, 1]]
+
+
+def test_permuted_labels_are_identical_and_similarity_is_symmetric(rng):
+    a = rng.integers(0, 6, size=(7, 8, 9))
+    perm = rng.permutation(6) * 10 - 17
+    assert hamming_similarity(a, perm[a]) == 1.0
+    assert variation_of_information(a, perm[a]) == pytest.approx(0, abs=1e-12)
+    b = rng.integers(0, 4, size=a.shape)
+    assert hamming_similarity(a, b) == hamming_similarity(b, a)
+    assert 0 <= hamming_similarity(a, b) <= 1
+
+
+def test_agrees_with_brute_force_on_random_labelings(rng):
+    for _ in range(20):
+        a = rng.integers(0, rng.integers(1, 6), size=50)
+        b = rng.integers(0, rng.integers(1, 6), size=50)
+        assert directional_hamming(a, b) == brute_force_directional(a, b)
+        assert directional_hamming(b, a) == brute_force_directional(b, a)
+        na, nb = len(np.unique(a)), len(np.unique(b))
+        assert region_ratio(a, b) == min(na, nb) / max(na, nb)
+
+
+def test_metric_errors():
+    with pytest.raises(ValueError, match="same shape"):
+        hamming_similarity(np.zeros(3, int), np.zeros(4, int))
+    with pytest.raises(ValueError, match="integer labels"):
+        hamming_similarity(np.zeros(3), np.zeros(3, int))

@@ -1,0 +1,162 @@
+import networkx as nx
+import numpy as np
+import pytest
+from numpy.testing import assert_array_equal
+from scipy import ndimage, sparse
+
+from tests.conftest import smooth_random_field
+from volseg.morse import descending_complex, grid_offsets
+
+
+def test_two_peaks_in_1d_by_hand():
+    f = np.array([0.0, 3.0, 1.0, 2.0, 0.5])
+    h = descending_complex(f)
+    assert h.maxima.tolist() == [1, 3]
+    assert h.persistence.tolist() == [np.inf, 1.0]  # 2 - 1 at the saddle x = 2
+    assert h.saddle.tolist() == [2] and h.saddle_value.tolist() == [1.0]
+    # The saddle vertex climbs to its highest neighbour (3.0 at x = 1).
+    assert_array_equal(h.segment(), [0, 0, 0, 1, 1])
+    assert_array_equal(h.segment(min_persistence=1.0), [0, 0, 0, 1, 1])
+    assert_array_equal(h.segment(min_persistence=1.01), [0, 0, 0, 0, 0])
+
+
+def test_plateau_ties_break_by_index():
+    # Equal values: the higher index is higher (simulation of simplicity).
+    f = np.array([1.0, 1.0, 1.0, 0.0, 1.0])
+    h = descending_complex(f)
+    assert h.maxima.tolist() == [4, 2]
+    # Vertex 3 (value 0) climbs to its highest neighbour: 4, equal in value to 2 but higher.
+    assert_array_equal(h.segment(), [1, 1, 1, 0, 0])
+    assert h.persistence.tolist() == [np.inf, 1.0]
+
+
+def test_2d_known_saddle():
+    # Two bumps on a 4-connected grid joined through the saddle at (2, 2).
+    y, x = np.mgrid[0:5, 0:7]
+    f = np.exp(-((x - 1) ** 2 + (y - 2) ** 2)) + 0.8 * np.exp(-((x - 5) ** 2 + (y - 2) ** 2))
+    h = descending_complex(f, connectivity=4)
+    tops = [np.unravel_index(m, f.shape) for m in h.maxima]
+    assert tops == [(2, 1), (2, 5)]
+    saddle = np.unravel_index(h.saddle[0], f.shape)
+    assert saddle == (2, 3)
+    assert np.isclose(h.persistence[1], f[2, 5] - f[2, 3])
+    graph = h.region_adjacency()
+    assert graph.number_of_nodes() == 2 and np.isclose(graph.edges[0, 1]["saddle"], f[2, 3])
+
+
+@pytest.mark.parametrize("shape", [(40,), (17, 19), (11, 12, 13)])
+def test_region_count_law_and_monotone_and_connected(shape, rng):
+    f = smooth_random_field(shape, rng, sigma=1.2)
+    h = descending_complex(f)
+    p = h.persistence
+    previous = np.inf
+    structure = np.zeros((3,) * len(shape), bool)
+    for step in grid_offsets(len(shape), "kuhn"):
+        structure[tuple(step + 1)] = True
+    structure[(1,) * len(shape)] = True
+    for t in np.r_[0, np.quantile(p[np.isfinite(p)], [0.1, 0.5, 0.9]), p[np.isfinite(p)].max() + 1]:
+        labels = h.segment(min_persistence=t)
+        k = labels.max() + 1
+        assert k == 1 + np.sum(np.isfinite(p) & (p >= t))
+        assert k <= previous
+        previous = k
+        assert labels.min() == 0 and len(np.unique(labels)) == k  # every voxel labelled
+        for region in range(k):
+            _, parts = ndimage.label(labels == region, structure=structure)
+            assert parts == 1, (t, region)
+        tops = [f.ravel()[np.flatnonzero(labels.ravel() == r)].max() for r in range(k)]
+        assert tops == sorted(tops, reverse=True)  # ordered by decreasing maximum
+
+
+def test_n_regions_is_exact_and_warns_when_too_many(rng):
+    f = smooth_random_field((20, 20, 20), rng, sigma=1.5)
+    h = descending_complex(f)
+    for k in [1, 2, 7, len(h.maxima)]:
+        assert h.segment(n_regions=k).max() + 1 == k
+        assert h.segment(min_persistence=h.threshold_for(k)).max() + 1 == k
+    with pytest.warns(UserWarning, match="only"):
+        labels = h.segment(n_regions=len(h.maxima) + 5)
+    assert labels.max() + 1 == len(h.maxima)
+
+
+def test_persistence_equals_gudhi_cubical_on_6_connected_grids(rng):
+    gudhi = pytest.importorskip("gudhi")
+    for shape in [(12, 13, 14), (30, 31)]:
+        f = smooth_random_field(shape, rng, sigma=1.5)
+        h = descending_complex(f, connectivity=6 if len(shape) == 3 else 4)
+        cubical = gudhi.CubicalComplex(vertices=-f)
+        cubical.compute_persistence()
+        pairs = cubical.persistence_intervals_in_dimension(0)
+        expected = np.sort(pairs[:, 1] - pairs[:, 0])
+        assert_array_equal(len(expected), len(h.maxima))
+        np.testing.assert_allclose(np.sort(h.persistence), expected, rtol=1e-12)
+
+
+def test_grid_and_explicit_adjacency_give_the_same_partition(rng):
+    f = smooth_random_field((9, 10, 11), rng, sigma=1.2)
+    offsets = grid_offsets(3, "kuhn")
+    index = np.arange(f.size).reshape(f.shape)
+    edges = []
+    for step in offsets:
+        src = tuple(slice(max(-s, 0), n - max(s, 0)) for s, n in zip(step, f.shape))
+        dst = tuple(slice(max(s, 0), n - max(-s, 0)) for s, n in zip(step, f.shape))
+        edges.append(np.c_[index[src].ravel(), index[dst].ravel()])
+    edges = np.concatenate(edges)
+    grid = descending_complex(f)
+    matrix = sparse.coo_matrix((np.ones(len(edges)), edges.T), shape=(f.size, f.size))
+    graph = nx.Graph()
+    graph.add_nodes_from(range(f.size))
+    graph.add_edges_from(edges.tolist())
+    for adjacency in [edges, matrix, graph]:
+        other = descending_complex(f.ravel(), adjacency=adjacency)
+        assert_array_equal(other.maxima, grid.maxima)
+        np.testing.assert_array_equal(other.persistence, grid.persistence)
+        for k in [1, 5, len(grid.maxima)]:
+            assert_array_equal(other.segment(n_regions=k).reshape(f.shape), grid.segment(n_regions=k))
+
+
+def test_networkx_node_order_is_documented_order():
+    graph = nx.path_graph(["a", "b", "c", "d"])
+    h = descending_complex(np.array([0.0, 2.0, 1.0, 3.0]), adjacency=graph)
+    assert h.maxima.tolist() == [3, 1]
+
+
+def test_disconnected_graph_keeps_one_region_per_component():
+    h = descending_complex(np.array([1.0, 2.0, 5.0, 4.0]), adjacency=np.array([[0, 1], [2, 3]]))
+    assert h.n_components == 2
+    with pytest.warns(UserWarning, match="connected components"):
+        assert h.segment(n_regions=1).max() == 1
+
+
+def test_bad_input_is_a_clear_error():
+    with pytest.raises(ValueError, match="NaN or infinite values \\(first at index \\[1\\]\\)"):
+        descending_complex(np.array([0.0, np.nan, 1.0]))
+    with pytest.raises(ValueError, match="outside the field"):
+        descending_complex(np.zeros(3), adjacency=np.array([[0, 3]]))
+    with pytest.raises(ValueError, match="3 vertices"):
+        descending_complex(np.zeros(3), adjacency=sparse.eye(4))
+    with pytest.raises(ValueError, match="must be 1-D"):
+        descending_complex(np.zeros((2, 2)), adjacency=np.array([[0, 1]]))
+    with pytest.raises(ValueError, match="not available in 3-D"):
+        descending_complex(np.zeros((3, 3, 3)), connectivity=8)
+    h = descending_complex(np.array([0.0, 1.0, 0.0, 2.0]))
+    with pytest.raises(ValueError, match="`n_regions` must be at least 1"):
+        h.segment(n_regions=0)
+    with pytest.raises(ValueError, match="not both"):
+        h.segment(min_persistence=1, n_regions=1)
+    with pytest.raises(ValueError, match="real numbers"):
+        descending_complex(np.array(["a", "b"]))
+
+
+def test_morse_imports_nothing_else_of_volseg():
+    import ast
+    import inspect
+
+    import volseg.morse as morse
+
+    tree = ast.parse(inspect.getsource(morse))
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and node.level:
+            assert [a.name for a in node.names] == ["_morse_kernels"], ast.dump(node)
+        if isinstance(node, ast.Import):
+            assert not any(a.name.startswith("volseg") for a in node.names)

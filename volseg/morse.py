@@ -1,0 +1,403 @@
+"""Descending Morse complex of a vertex field, simplified hierarchically by persistence.
+
+Stands alone: it imports nothing else of volseg (numpy, scipy and numba; networkx
+only for graph input and `region_adjacency`). DESIGN.md section 5 is the contract:
+
+- order: simulation of simplicity, u is higher than v when (f(u), u) > (f(v), v),
+  so every result is deterministic and plateaus need no special case;
+- maxima: vertices higher than all their neighbours;
+- descending cells: each vertex belongs to the maximum its steepest ascent (always
+  to the highest neighbour) reaches;
+- persistence (0-dimensional, superlevel sets, elder rule): sweeping from high to
+  low, when two components meet at vertex v the one with the lower maximum m dies,
+  ``persistence(m) = f(m) - f(v)``; a component's highest maximum has infinite
+  persistence. The saddle of an edge (u, v) is ``min(f(u), f(v))``;
+- simplification at threshold t: every maximum with persistence < t merges, with
+  its whole cell, across the saddle edge where it died into the cell on the other
+  side (transitively). Merging across the saddle edge, rather than into the
+  component's oldest maximum, keeps every region connected; the region count is
+  still ``1 + #{non-global maxima with persistence >= t}`` (per connected
+  component of the graph).
+
+Examples
+--------
+>>> import numpy as np
+>>> field = np.array([0.0, 3.0, 1.0, 2.0, 0.5])  # two peaks, at 1 and 3
+>>> hierarchy = descending_complex(field)
+>>> hierarchy.maxima.tolist(), hierarchy.persistence.tolist()
+([1, 3], [inf, 1.0])
+>>> hierarchy.segment().tolist(), hierarchy.segment(n_regions=1).tolist()
+([0, 0, 0, 1, 1], [0, 0, 0, 0, 0])
+"""
+
+from __future__ import annotations
+
+import itertools
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = ["descending_complex", "MorseHierarchy", "grid_offsets"]
+
+
+def grid_offsets(ndim: int, connectivity="kuhn") -> NDArray[np.intp]:
+    """(m, ndim) neighbour offsets of a grid connectivity.
+
+    ``'kuhn'``: the edges of the Kuhn triangulation (3-D: 14 neighbours,
+    +-(1,0,0), +-(0,1,0), +-(0,0,1), +-(1,1,0), +-(0,1,1), +-(1,0,1), +-(1,1,1);
+    2-D: 6, +-(1,0), +-(0,1), +-(1,1); 1-D: 2). Integers: 6, 18, 26 (3-D), 4, 8
+    (2-D), 2 (1-D): face, edge and corner neighbours.
+    """
+    steps = [np.array(s) for s in itertools.product((-1, 0, 1), repeat=ndim) if any(s)]
+    if connectivity == "kuhn":
+        # Kuhn edges join points whose difference is a 0/1 vector or its negative.
+        chosen = [s for s in steps if (s >= 0).all() or (s <= 0).all()]
+    else:
+        allowed = {1: {2: 1}, 2: {4: 1, 8: 2}, 3: {6: 1, 18: 2, 26: 3}}.get(ndim, {})
+        if connectivity not in allowed:
+            choices = ", ".join(map(str, ["'kuhn'", *allowed]))
+            raise ValueError(
+                f"`connectivity` {connectivity!r} is not available in {ndim}-D; choose {choices}"
+            )
+        chosen = [s for s in steps if np.abs(s).sum() <= allowed[connectivity]]
+    return np.array(chosen, dtype=np.intp).reshape(-1, ndim)
+
+
+def _csr_adjacency(adjacency, n_vertices):
+    """Symmetric CSR (indptr, indices) without self-loops from sparse, (E, 2) or networkx."""
+    from scipy import sparse
+
+    if hasattr(adjacency, "nodes") and hasattr(adjacency, "edges"):  # networkx graph
+        import networkx as nx
+
+        matrix = nx.to_scipy_sparse_array(adjacency, nodelist=list(adjacency.nodes), weight=None)
+    elif sparse.issparse(adjacency):
+        matrix = adjacency
+    else:
+        edges = np.asarray(adjacency)
+        if edges.ndim != 2 or edges.shape[1] != 2:
+            raise ValueError(
+                f"`adjacency` must be a sparse matrix, an (E, 2) edge array or a networkx "
+                f"graph, got an array of shape {edges.shape}"
+            )
+        if edges.size and not np.issubdtype(edges.dtype, np.integer):
+            raise ValueError(f"`adjacency` edges must be integer indices, got {edges.dtype}")
+        if edges.size and (edges.min() < 0 or edges.max() >= n_vertices):
+            raise ValueError(
+                f"`adjacency` refers to vertices outside the field (indices must be in "
+                f"[0, {n_vertices - 1}], got [{edges.min()}, {edges.max()}])"
+            )
+        matrix = sparse.coo_matrix(
+            (np.ones(len(edges), dtype=np.int8), (edges[:, 0], edges[:, 1])),
+            shape=(n_vertices, n_vertices),
+        )
+    if matrix.shape != (n_vertices, n_vertices):
+        raise ValueError(
+            f"`adjacency` is {matrix.shape[0]} x {matrix.shape[1]} but the field has "
+            f"{n_vertices} vertices"
+        )
+    matrix = sparse.csr_matrix(matrix, dtype=np.int8)
+    matrix = (matrix + matrix.T).tocsr()
+    matrix.setdiag(0)
+    matrix.eliminate_zeros()
+    return matrix.indptr.astype(np.int64), matrix.indices.astype(np.int64)
+
+
+def descending_complex(field: ArrayLike, *, adjacency=None, connectivity="kuhn") -> "MorseHierarchy":
+    """Descending Morse complex of `field` and its persistence hierarchy.
+
+    Parameters
+    ----------
+    field : ndarray of real
+        On a grid: an N-d array (1-D, 2-D or 3-D), neighbours by `connectivity`.
+        On a graph: a 1-D array, one value per vertex, with `adjacency`.
+    adjacency : scipy sparse matrix, (E, 2) int array or networkx graph, optional
+        Vertex adjacency (symmetrised; self-loops ignored). For a networkx graph,
+        ``field[i]`` is the value of the i-th node of ``list(graph.nodes)``.
+    connectivity : {'kuhn', 4, 8, 6, 18, 26, 2}
+        Grid neighbourhood (see `grid_offsets`); ignored with `adjacency`.
+
+    Returns
+    -------
+    MorseHierarchy
+
+    Raises
+    ------
+    ValueError
+        NaN or infinite values, a non-numeric field, adjacency of the wrong size or
+        with out-of-range vertices, an unknown connectivity.
+    """
+    from . import _morse_kernels as kernels
+
+    field = np.asarray(field)
+    if field.dtype.kind not in "biuf":
+        raise ValueError(f"`field` must hold real numbers, got dtype {field.dtype}")
+    if field.size == 0:
+        raise ValueError("`field` is empty")
+    values = field.astype(np.float64)
+    if not np.isfinite(values).all():
+        bad = np.argwhere(~np.isfinite(values))[0].tolist()
+        raise ValueError(
+            f"`field` holds {int((~np.isfinite(values)).sum())} NaN or infinite values "
+            f"(first at index {bad})"
+        )
+    if adjacency is not None:
+        if field.ndim != 1:
+            raise ValueError(f"with `adjacency`, `field` must be 1-D (one value per vertex), got shape {field.shape}")
+        indptr, indices = _csr_adjacency(adjacency, field.size)
+        flat = values
+        offsets = np.zeros(0, dtype=np.int64)
+        grid = False
+        shape = field.shape
+    else:
+        shape = field.shape
+        if field.ndim > 3:
+            raise ValueError(f"grid fields must be 1-D, 2-D or 3-D, got shape {shape}")
+        steps = grid_offsets(field.ndim, connectivity)
+        padded = np.pad(values, 1, constant_values=-np.inf)
+        strides = np.array([s // padded.itemsize for s in padded.strides], dtype=np.int64)
+        offsets = (steps @ strides).astype(np.int64)
+        flat = padded.ravel()
+        indptr = indices = np.zeros(1, dtype=np.int64)
+        grid = True
+    if grid:
+        real = np.zeros((1,) * field.ndim, dtype=np.int64)
+        for axis, (size, stride) in enumerate(zip(shape, strides)):
+            step = (np.arange(size, dtype=np.int64) + 1) * stride
+            real = real + step.reshape([-1 if a == axis else 1 for a in range(field.ndim)])
+        real = real.ravel()
+    else:
+        real = np.arange(field.size, dtype=np.int64)
+    index_type = np.int32 if len(flat) < 2**31 - 1 else np.int64
+    up = np.empty(len(flat), dtype=index_type)
+    kernels.steepest_ascent(flat, real, grid, offsets, indptr, indices, up)
+    cell = np.empty(len(flat), dtype=index_type)
+    kernels.resolve_cells(real, up, cell)
+    maxima = real[up[real] == real]
+    # Maximum ids by decreasing value (simulation of simplicity: then by index).
+    maxima = maxima[np.lexsort((maxima, flat[maxima]))[::-1]]
+    up[maxima] = np.arange(len(maxima), dtype=index_type)  # up is free now: root -> id
+    kernels.relabel(real, cell, up)
+    del up
+    mask = np.empty(len(real), dtype=np.bool_)
+    kernels.boundary_mask(flat, real, grid, offsets, indptr, indices, cell, mask)
+    candidates = real[mask]
+    del mask, real
+    order = candidates[np.argsort(flat[candidates], kind="stable")]
+    n_max = len(maxima)
+    ev = [np.empty(max(n_max - 1, 0), dtype=t) for t in (np.int32, np.int32, np.int32, np.int64)]
+    n_ev = kernels.merge_sweep(flat, order, grid, offsets, indptr, indices, cell, n_max, *ev)
+    del order, candidates
+    if grid:
+        cells = cell.reshape(padded.shape)[(slice(1, -1),) * field.ndim].astype(np.int32)
+        # padded flat index -> field flat index
+        maxima = np.ravel_multi_index(
+            tuple(c - 1 for c in np.unravel_index(maxima, padded.shape)), shape)
+        saddles = np.ravel_multi_index(
+            tuple(c - 1 for c in np.unravel_index(ev[3][:n_ev], padded.shape)), shape)
+    else:
+        cells = cell.astype(np.int32, copy=False)
+        saddles = ev[3][:n_ev]
+    del cell
+    return MorseHierarchy(
+        shape=shape,
+        cells=cells,
+        maxima=maxima,
+        values=values.ravel()[maxima],
+        young=ev[0][:n_ev].copy(),
+        elder=ev[1][:n_ev].copy(),
+        target=ev[2][:n_ev].copy(),
+        saddle=saddles,
+        saddle_value=values.ravel()[saddles],
+        _field=values,
+        _adjacency=(indptr, indices) if not grid else None,
+        _connectivity=connectivity if grid else None,
+    )
+
+
+@dataclass(eq=False)
+class MorseHierarchy:
+    """The descending Morse complex of a field and its merge hierarchy.
+
+    Attributes
+    ----------
+    shape : tuple
+        The field's shape; labels have it.
+    cells : ndarray of int32, `shape`
+        The unsimplified descending cells: the id of each vertex's maximum.
+    maxima : (M,) ndarray of int
+        Flat vertex index of each maximum, by decreasing value (id = position).
+    values : (M,) ndarray of float
+        Field value at each maximum.
+    young, elder, target : (E,) ndarray of int32
+        Merge events, in sweep order (decreasing saddle value): maximum ``young``
+        dies into the component of ``elder`` (elder rule); its cell joins the cell
+        ``target`` across the saddle edge when simplified.
+    saddle : (E,) ndarray of int
+        Flat vertex index of each event's saddle (the lower end of the highest edge
+        crossing between the two components).
+    saddle_value : (E,) ndarray of float
+    """
+
+    shape: tuple
+    cells: NDArray[np.int32]
+    maxima: NDArray[np.int64]
+    values: NDArray[np.float64]
+    young: NDArray[np.int32]
+    elder: NDArray[np.int32]
+    target: NDArray[np.int32]
+    saddle: NDArray[np.int64]
+    saddle_value: NDArray[np.float64]
+    _field: NDArray[np.float64]
+    _adjacency: tuple | None = None
+    _connectivity: object = None
+
+    @property
+    def persistence(self) -> NDArray[np.float64]:
+        """(M,) persistence of each maximum, aligned with `maxima`; inf for survivors."""
+        out = np.full(len(self.maxima), np.inf)
+        out[self.young] = self.values[self.young] - self.saddle_value
+        return out
+
+    @property
+    def event_persistence(self) -> NDArray[np.float64]:
+        """(E,) persistence of each merge event."""
+        return self.values[self.young] - self.saddle_value
+
+    @property
+    def n_components(self) -> int:
+        """Connected components of the graph (regions that can never merge)."""
+        return len(self.maxima) - len(self.young)
+
+    def threshold_for(self, n_regions: int) -> float:
+        """A persistence threshold whose cut has `n_regions` regions, if ties allow.
+
+        The midpoint between the persistences of the last kept and the first merged
+        event; `segment(n_regions=k)` is exact even where ties make no threshold so.
+        """
+        p = np.sort(self.event_persistence)[::-1]
+        keep = n_regions - self.n_components
+        if keep <= 0:
+            return float(p[0]) + 1.0 if len(p) else 0.0
+        if keep >= len(p):
+            return 0.0
+        return 0.5 * float(p[keep - 1] + p[keep])
+
+    def _merged_events(self, min_persistence, n_regions):
+        p = self.event_persistence
+        if n_regions is not None:
+            n_regions = int(n_regions)
+            if n_regions < 1:
+                raise ValueError(f"`n_regions` must be at least 1, got {n_regions}")
+            if n_regions > len(self.maxima):
+                warnings.warn(
+                    f"asked for {n_regions} regions but the field has only "
+                    f"{len(self.maxima)} maxima; returning all of them", stacklevel=3)
+            elif n_regions < self.n_components:
+                warnings.warn(
+                    f"asked for {n_regions} regions but the graph has {self.n_components} "
+                    "connected components; returning one region per component", stacklevel=3)
+            keep = max(n_regions - self.n_components, 0)
+            # Keep the `keep` most persistent events; ties: older (lower id) young first.
+            rank = np.lexsort((self.young, -p))
+            merged = np.ones(len(p), dtype=bool)
+            merged[rank[:keep]] = False
+            return merged
+        t = 0.0 if min_persistence is None else float(min_persistence)
+        if not np.isfinite(t) and t != np.inf:
+            raise ValueError(f"`min_persistence` must be a number, got {min_persistence}")
+        return p < t
+
+    def region_of_maximum(self, min_persistence=None, n_regions=None) -> NDArray[np.int32]:
+        """(M,) region label of each maximum for a cut (see `segment`)."""
+        from scipy.sparse import coo_matrix
+        from scipy.sparse.csgraph import connected_components
+
+        if min_persistence is not None and n_regions is not None:
+            raise ValueError("give `min_persistence` or `n_regions`, not both")
+        merged = self._merged_events(min_persistence, n_regions)
+        m = len(self.maxima)
+        graph = coo_matrix((np.ones(int(merged.sum())), (self.young[merged], self.target[merged])),
+                           shape=(m, m))
+        _, component = connected_components(graph, directed=False)
+        # Order regions by their highest maximum (lowest id).
+        first = np.full(component.max() + 1, m, dtype=np.int64)
+        np.minimum.at(first, component, np.arange(m))
+        rank = np.empty_like(first)
+        rank[np.argsort(first)] = np.arange(len(first))
+        return rank[component].astype(np.int32)
+
+    def segment(self, min_persistence: float | None = None, n_regions: int | None = None):
+        """Labels of a cut of the hierarchy: no recomputation, one gather per vertex.
+
+        Parameters
+        ----------
+        min_persistence : float, optional
+            Merge every maximum with persistence below it (default 0: the
+            unsimplified complex).
+        n_regions : int, optional
+            Instead, exactly this many regions: the ``n_regions - 1`` most
+            persistent non-global maxima stay (ties broken by maximum value). Fewer
+            maxima than asked: all of them, with a warning.
+
+        Returns
+        -------
+        ndarray of int32, `shape`
+            Consecutive labels 0..k-1, ordered by decreasing maximum value.
+        """
+        return self.region_of_maximum(min_persistence, n_regions)[self.cells]
+
+    def region_adjacency(self, labels=None, **cut):
+        """The regions of a cut as a networkx graph.
+
+        Nodes are region labels with ``size``, ``maximum`` (flat vertex index) and
+        ``value``; edges join adjacent regions with ``saddle`` (the highest value
+        min(f(u), f(v)) over edges (u, v) crossing between them). `labels`
+        defaults to ``segment(**cut)``.
+        """
+        import networkx as nx
+
+        if labels is None:
+            labels = self.segment(**cut)
+        labels = np.asarray(labels)
+        f = self._field
+        pairs, saddles = [], []
+        if self._adjacency is None:
+            for step in grid_offsets(len(self.shape), self._connectivity):
+                if tuple(step) <= (0,) * len(step):
+                    continue
+                src = tuple(slice(max(-s, 0), n - max(s, 0)) for s, n in zip(step, self.shape))
+                dst = tuple(slice(max(s, 0), n - max(-s, 0)) for s, n in zip(step, self.shape))
+                a, b = labels[src].ravel(), labels[dst].ravel()
+                cross = a != b
+                pairs.append(np.sort(np.stack([a[cross], b[cross]], 1), axis=1))
+                saddles.append(np.minimum(f[src].ravel()[cross], f[dst].ravel()[cross]))
+        else:
+            indptr, indices = self._adjacency
+            u = np.repeat(np.arange(len(indptr) - 1), np.diff(indptr))
+            a, b = labels[u], labels[indices]
+            cross = a < b
+            pairs.append(np.stack([a[cross], b[cross]], 1))
+            saddles.append(np.minimum(f[u[cross]], f[indices[cross]]))
+        pairs = np.concatenate(pairs) if pairs else np.zeros((0, 2), int)
+        saddles = np.concatenate(saddles) if saddles else np.zeros(0)
+        graph = nx.Graph()
+        flat_labels = labels.ravel()
+        flat_field = f.ravel()
+        sizes = np.bincount(flat_labels)
+        # Highest vertex per region under simulation of simplicity: the last write wins.
+        order = np.lexsort((np.arange(flat_field.size), flat_field))
+        top = np.full(len(sizes), -1)
+        top[flat_labels[order]] = order
+        for region in range(len(sizes)):
+            graph.add_node(region, size=int(sizes[region]), maximum=int(top[region]),
+                           value=float(flat_field[top[region]]))
+        if len(pairs):
+            key = pairs[:, 0].astype(np.int64) * len(sizes) + pairs[:, 1]
+            order = np.lexsort((saddles, key))
+            last = np.r_[key[order][1:] != key[order][:-1], True]
+            for k, s in zip(key[order][last], saddles[order][last]):
+                graph.add_edge(int(k // len(sizes)), int(k % len(sizes)), saddle=float(s))
+        return graph
