@@ -1,0 +1,143 @@
+import json
+import os
+import stat
+
+import nibabel
+import numpy as np
+import pytest
+
+from volseg.cli import main
+
+
+@pytest.mark.parametrize("name, shape", [("fuel", (64, 64, 64)), ("neghip", (64, 64, 64)),
+                                         ("silicium", (98, 34, 34))])
+def test_segment_real_datasets_by_name(tmp_path, name, shape, capsys):
+    assert main(["segment", name, "-o", str(tmp_path), "--regions", "25", "-q", "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    labels = np.asanyarray(nibabel.load(tmp_path / f"{name}_labels.nii.gz").dataobj)
+    curvature = np.asanyarray(nibabel.load(tmp_path / f"{name}_curvature.nii.gz").dataobj)
+    assert labels.shape == shape and curvature.shape == shape
+    assert np.isfinite(curvature).all()
+    assert len(np.unique(labels)) == 25 and labels.min() == 0
+    assert summary == json.loads((tmp_path / f"{name}_summary.json").read_text())
+    assert summary["n_regions"] == 25
+    assert [r["size"] for r in summary["regions"]] == np.bincount(labels.ravel()).tolist()
+    for region in summary["regions"]:
+        assert labels[tuple(region["maximum"])] == region["label"]
+    assert summary["input_sha256"] and summary["operator"] == "weighted"
+
+
+def test_preview_is_a_real_picture(tmp_path):
+    import matplotlib.image
+
+    assert main(["segment", "silicium", "-o", str(tmp_path), "-q"]) == 0
+    image = matplotlib.image.imread(tmp_path / "silicium_preview.png")
+    assert image.shape[0] > 600 and image.shape[1] > 600
+    assert image[..., :3].std() > 0.1  # not blank
+    assert len(np.unique(image[..., :3].reshape(-1, 3), axis=0)) > 500  # many colours
+
+
+def test_segment_a_raw_path_with_options(tmp_path, volvis_dir):
+    source = volvis_dir / "silicium_98x34x34_uint8.raw"
+    argv = ["segment", str(source), "-o", str(tmp_path), "--operator", "laplace-beltrami",
+            "--min-persistence", "0.05", "--noise", "1", "--seed", "3", "-q"]
+    assert main(argv) == 0
+    summary = json.loads((tmp_path / "silicium_summary.json").read_text())
+    assert summary["operator"] == "laplace_beltrami" and summary["noise_percent"] == 1
+    assert summary["min_persistence"] == 0.05
+
+
+def _no_outputs(folder):
+    return not [p for p in folder.iterdir() if p.name.endswith((".gz", ".json", ".png"))]
+
+
+def test_errors_exit_2_with_one_line_and_no_partial_files(tmp_path, capsys):
+    out = tmp_path / "out"
+    cases = [
+        (["segment", str(tmp_path / "missing_4x4x4_uint8.raw")], "no such file"),
+        (["segment", "nosuchdataset"], "not a dataset name"),
+    ]
+    short = tmp_path / "short_4x4x4_uint8.raw"
+    short.write_bytes(bytes(10))
+    cases.append((["segment", str(short)], "expected 64 bytes"))
+    for argv, message in cases:
+        assert main(argv + ["-o", str(out), "-q"]) == 2
+        err = capsys.readouterr().err
+        assert message in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+        assert _no_outputs(out)
+
+
+def test_checksum_mismatch_is_refused(tmp_path, monkeypatch, capsys):
+    mirror = tmp_path / "mirror"
+    mirror.mkdir()
+    (mirror / "fuel_64x64x64_uint8.raw").write_bytes(bytes(64**3))
+    monkeypatch.setenv("VOLSEG_DATA_DIR", str(mirror))
+    assert main(["segment", "fuel", "-o", str(tmp_path / "out"), "-q"]) == 2
+    assert "checksum mismatch" in capsys.readouterr().err
+
+
+def test_offline_without_mirror_says_where_to_put_the_file(tmp_path, monkeypatch, capsys):
+    monkeypatch.setenv("VOLSEG_DATA_DIR", str(tmp_path / "empty"))
+    import data_fetch
+
+    with pytest.raises(data_fetch.DatasetError, match="put it at"):
+        data_fetch.fetch("nucleon", download=False)
+
+
+def test_existing_outputs_need_force(tmp_path, capsys):
+    assert main(["segment", "nucleon", "-o", str(tmp_path), "-q"]) == 0
+    before = (tmp_path / "nucleon_summary.json").read_text()
+    assert main(["segment", "nucleon", "-o", str(tmp_path), "-q", "--regions", "5"]) == 2
+    assert "use --force" in capsys.readouterr().err
+    assert (tmp_path / "nucleon_summary.json").read_text() == before
+    assert main(["segment", "nucleon", "-o", str(tmp_path), "-q", "--regions", "5", "--force"]) == 0
+    assert json.loads((tmp_path / "nucleon_summary.json").read_text())["n_regions"] == 5
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
+
+
+def test_unwritable_output_folder(tmp_path, capsys, monkeypatch):
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    locked.chmod(stat.S_IRUSR | stat.S_IXUSR)
+    if os.geteuid() == 0:  # root writes anywhere: make the permission check see the mode
+        import volseg.cli
+
+        monkeypatch.setattr(volseg.cli.os, "access", lambda path, mode: False)
+    assert main(["segment", "nucleon", "-o", str(locked), "-q"]) == 2
+    assert "not writable" in capsys.readouterr().err
+
+
+def test_output_folder_that_is_a_file(tmp_path, capsys):
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    assert main(["segment", "nucleon", "-o", str(blocker / "sub"), "-q"]) == 2
+    assert "cannot create the output folder" in capsys.readouterr().err
+
+
+def test_usage_errors_exit_2(capsys):
+    assert main(["segment"]) == 2
+    assert main(["segment", "fuel", "--regions", "3", "--min-persistence", "1"]) == 2
+    assert main(["frobnicate"]) == 2
+
+
+def test_demo_runs_offline_in_a_clean_folder(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("VOLSEG_DATA_DIR", str(tmp_path / "nothing"))
+    assert main(["demo", "-q"]) == 0
+    printed = capsys.readouterr().out
+    for kind in ["labels.nii.gz", "curvature.nii.gz", "summary.json", "preview.png"]:
+        assert (tmp_path / "volseg-demo" / f"demo_{kind}").exists()
+        assert kind in printed
+
+
+def test_info_and_compare(tmp_path, capsys):
+    assert main(["info", "silicium"]) == 0
+    assert "(98, 34, 34)" in capsys.readouterr().out
+    a = np.zeros((4, 4, 4), np.int32)
+    b = a.copy()
+    b[2:] = 1
+    for name, data in [("a.npy", a), ("b.npy", b)]:
+        np.save(tmp_path / name, data)
+    assert main(["compare", str(tmp_path / "a.npy"), str(tmp_path / "b.npy"), "--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert result["hamming_similarity"] == 0.75 and result["region_ratio"] == 0.5

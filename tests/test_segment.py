@@ -1,0 +1,35 @@
+import numpy as np
+import pytest
+
+from volseg import Volume, segment_volume
+from volseg.cli import _synthetic_volume
+
+
+def test_segment_volume_defaults_to_30_regions_and_accepts_volume_or_array():
+    data = _synthetic_volume(32)
+    result = segment_volume(data)
+    assert result.n_regions == 30 and result.labels.shape == data.shape
+    again = segment_volume(Volume(data, spacing=(1.0, 1.0, 1.0)))
+    np.testing.assert_array_equal(again.labels, result.labels)
+    recut = result.hierarchy.segment(n_regions=10)
+    assert recut.max() + 1 == 10
+    assert result.labels[np.unravel_index(result.region_maxima()[0], data.shape)] == 0
+
+
+def test_blob_centres_are_curvature_maxima():
+    # Three separated Gaussian blobs: with 4 regions (3 blobs + background) each blob
+    # centre lies in its own region.
+    axis = np.linspace(-1, 1, 33)
+    x, y, z = np.meshgrid(axis, axis, axis, indexing="ij")
+    centres = [(-0.5, -0.5, 0), (0.5, -0.4, 0.3), (0, 0.5, -0.4)]
+    f = sum(np.exp(-((x - a) ** 2 + (y - b) ** 2 + (z - c) ** 2) / 0.04) for a, b, c in centres)
+    labels = segment_volume(f, n_regions=4).labels
+    index = [tuple(np.round((np.array(c) + 1) * 16).astype(int)) for c in centres]
+    assert len({labels[i] for i in index}) == 3
+
+
+def test_segment_errors():
+    with pytest.raises(ValueError, match="not both"):
+        segment_volume(np.zeros((4, 4, 4)), n_regions=2, min_persistence=1.0)
+    with pytest.raises(ValueError, match="unknown `operator`"):
+        segment_volume(np.zeros((4, 4, 4)), operator="nope")
