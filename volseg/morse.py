@@ -136,7 +136,7 @@ def descending_complex(field: ArrayLike, *, adjacency=None, connectivity="kuhn")
         raise ValueError(f"`field` must hold real numbers, got dtype {field.dtype}")
     if field.size == 0:
         raise ValueError("`field` is empty")
-    values = field.astype(np.float64)
+    values = field.astype(np.float64, copy=False)
     if not np.isfinite(values).all():
         bad = np.argwhere(~np.isfinite(values))[0].tolist()
         raise ValueError(
@@ -163,9 +163,10 @@ def descending_complex(field: ArrayLike, *, adjacency=None, connectivity="kuhn")
         indptr = indices = np.zeros(1, dtype=np.int64)
         grid = True
     if grid:
-        real = np.zeros((1,) * field.ndim, dtype=np.int64)
+        index_type = np.int32 if padded.size < 2**31 - 1 else np.int64
+        real = np.zeros((1,) * field.ndim, dtype=index_type)
         for axis, (size, stride) in enumerate(zip(shape, strides)):
-            step = (np.arange(size, dtype=np.int64) + 1) * stride
+            step = ((np.arange(size) + 1) * stride).astype(index_type)
             real = real + step.reshape([-1 if a == axis else 1 for a in range(field.ndim)])
         real = real.ravel()
     else:

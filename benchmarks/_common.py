@@ -1,0 +1,27 @@
+"""Helpers for the side-by-side benchmarks (run by hand, not by CI)."""
+
+import json
+import resource
+import subprocess
+import sys
+import time
+
+
+def peak_rss_mb():
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
+def timed(function, *args, repeat=1, **kwargs):
+    """(best wall seconds over `repeat` runs, last result)."""
+    best, result = float("inf"), None
+    for _ in range(repeat):
+        start = time.perf_counter()
+        result = function(*args, **kwargs)
+        best = min(best, time.perf_counter() - start)
+    return best, result
+
+
+def in_fresh_process(code: str) -> dict:
+    """Run `code` (which prints one JSON object) in a new interpreter; peak memory is its own."""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
