@@ -160,3 +160,49 @@ def test_morse_imports_nothing_else_of_volseg():
             assert [a.name for a in node.names] == ["_morse_kernels"], ast.dump(node)
         if isinstance(node, ast.Import):
             assert not any(a.name.startswith("volseg") for a in node.names)
+
+
+def _reference_persistence(values, edges):
+    """Elder-rule vertex sweep in plain Python: sorted (birth - death) of dying maxima."""
+    n = len(values)
+    neighbours = [[] for _ in range(n)]
+    for a, b in edges:
+        neighbours[a].append(b)
+        neighbours[b].append(a)
+    key = lambda v: (values[v], v)  # noqa: E731
+    parent = list(range(n))
+
+    def find(x):
+        while parent[x] != x:
+            parent[x] = parent[parent[x]]
+            x = parent[x]
+        return x
+
+    seen, peak, deaths = set(), {}, []
+    for v in sorted(range(n), key=key, reverse=True):
+        seen.add(v)
+        peak[v] = v
+        for u in neighbours[v]:
+            if u not in seen:
+                continue
+            ru, rv = find(u), find(v)
+            if ru == rv:
+                continue
+            young, old = (ru, rv) if key(peak[ru]) < key(peak[rv]) else (rv, ru)
+            if peak[young] != v:
+                deaths.append(values[peak[young]] - values[v])
+            parent[young] = old
+    return sorted(deaths)
+
+
+def test_dense_cross_cell_edges_match_a_reference_sweep():
+    # 60 high vertices, each of 100 low ones joined to a random half of them: low
+    # vertices fall into many cells and each touches 30, so the cell pairs outnumber
+    # the edge pass's first allocation (one per two vertices) and its rerun is used.
+    rng = np.random.default_rng(3)
+    values = np.concatenate([1 + rng.random(60), rng.random(100)])
+    edges = np.array([(a, b) for b in range(60, 160) for a in rng.permutation(60)[:30]])
+    hierarchy = descending_complex(values, adjacency=edges)
+    assert len(hierarchy.maxima) == 60
+    got = np.sort(hierarchy.values[hierarchy.young] - hierarchy.saddle_value)
+    np.testing.assert_allclose(got, _reference_persistence(values, edges.tolist()))

@@ -13,6 +13,7 @@ import shutil
 import sys
 import tempfile
 import time
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -178,11 +179,21 @@ def segment_to_files(volume, out_dir, *, name, operator="weighted", n_regions=No
     # the end, so a failure (or Ctrl-C) leaves no partial output.
     staging = Path(tempfile.mkdtemp(prefix=".volseg-", dir=out_dir))
     try:
-        write_volume(staging / targets["labels"].name, labels, spacing=result.spacing)
-        write_volume(staging / targets["curvature"].name, result.curvature.astype(np.float32),
-                     spacing=result.spacing)
-        write_preview(staging / targets["preview"].name, data, result.curvature, labels,
-                      title=f"{name}: {result.n_regions} regions, {result.operator} curvature")
+        # Labels in the smallest unsigned type that holds them (what label viewers
+        # expect); the three writers run at once (zlib releases the GIL).
+        label_type = np.min_scalar_type(max(result.n_regions - 1, 0))
+        with ThreadPoolExecutor(3) as pool:
+            jobs = [
+                pool.submit(write_volume, staging / targets["labels"].name,
+                            labels.astype(label_type), spacing=result.spacing),
+                pool.submit(write_volume, staging / targets["curvature"].name,
+                            result.curvature.astype(np.float32), spacing=result.spacing),
+                pool.submit(write_preview, staging / targets["preview"].name, data,
+                            result.curvature, labels,
+                            title=f"{name}: {result.n_regions} regions, {result.operator} curvature"),
+            ]
+            for job in jobs:
+                job.result()
         summary["timings_s"]["total"] = round(time.perf_counter() - started, 4)
         (staging / targets["summary"].name).write_text(json.dumps(summary, indent=2))
         for target in targets.values():

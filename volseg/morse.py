@@ -105,6 +105,49 @@ def _csr_adjacency(adjacency, n_vertices):
     return matrix.indptr.astype(np.int64), matrix.indices.astype(np.int64)
 
 
+def _cross_edges(kernels, flat, real, grid, offsets, indptr, indices, cell):
+    """(a, b, saddle) of the cross-cell edges, one compiled pass in fixed chunks.
+
+    Each chunk gets room for one edge per two vertices (about 3x what smooth and noisy
+    fields need); a chunk that overflows is rerun alone with exact room.
+    """
+    n_chunks = min(max(1, len(real) // 4096), 1024)
+    bounds = np.linspace(0, len(real), n_chunks + 1).astype(np.int64)
+    capacity = (bounds[1:] - bounds[:-1]) // 2 + 64
+    starts = np.concatenate([[0], np.cumsum(capacity)[:-1]]).astype(np.int64)
+    counts = np.zeros(n_chunks, dtype=np.int64)
+    total = int(capacity.sum())
+    out = [np.empty(total, dtype=np.int32), np.empty(total, dtype=np.int32),
+           np.empty(total, dtype=np.int64)]
+    kernels.cross_edges(flat, real, bounds, grid, offsets, indptr, indices, cell,
+                        *out, starts, capacity, counts)
+    pieces = []
+    for c in range(n_chunks):
+        if counts[c] <= capacity[c]:
+            pieces.append([arr[starts[c]:starts[c] + counts[c]] for arr in out])
+            continue
+        room = [np.empty(counts[c], dtype=arr.dtype) for arr in out]
+        kernels.cross_edges(flat, real, bounds[c:c + 2], grid, offsets, indptr, indices,
+                            cell, *room, np.zeros(1, np.int64), counts[c:c + 1].copy(),
+                            np.zeros(1, np.int64))
+        pieces.append(room)
+    return tuple(np.concatenate([p[k] for p in pieces]) for k in range(3))
+
+
+def _saddle_order(flat, saddle):
+    """Argsort of saddles by (value, vertex index), the simulation of simplicity order.
+
+    An unstable value sort, then a compiled pass that orders each run of equal values
+    by vertex (curvature fields have plateaus): 2x faster than np.lexsort at 256^3.
+    """
+    from . import _morse_kernels as kernels
+
+    keys = flat[saddle]
+    order = np.argsort(keys)
+    kernels.break_ties(order, keys[order], saddle)
+    return order
+
+
 def descending_complex(field: ArrayLike, *, adjacency=None, connectivity="kuhn") -> "MorseHierarchy":
     """Descending Morse complex of `field` and its persistence hierarchy.
 
@@ -182,15 +225,16 @@ def descending_complex(field: ArrayLike, *, adjacency=None, connectivity="kuhn")
     up[maxima] = np.arange(len(maxima), dtype=index_type)  # up is free now: root -> id
     kernels.relabel(real, cell, up)
     del up
-    mask = np.empty(len(real), dtype=np.bool_)
-    kernels.boundary_mask(flat, real, grid, offsets, indptr, indices, cell, mask)
-    candidates = real[mask]
-    del mask, real
-    order = candidates[np.argsort(flat[candidates], kind="stable")]
+    # Cross-cell edges, gathered in memory order (parallel, cache-friendly) with a
+    # per-pair dedup, then one Kruskal over them by decreasing saddle (value, index).
+    edge_a, edge_b, edge_v = _cross_edges(kernels, flat, real, grid, offsets, indptr,
+                                          indices, cell)
+    del real
+    order = _saddle_order(flat, edge_v)
     n_max = len(maxima)
     ev = [np.empty(max(n_max - 1, 0), dtype=t) for t in (np.int32, np.int32, np.int32, np.int64)]
-    n_ev = kernels.merge_sweep(flat, order, grid, offsets, indptr, indices, cell, n_max, *ev)
-    del order, candidates
+    n_ev = kernels.kruskal(order, edge_a, edge_b, edge_v, n_max, *ev)
+    del order, edge_a, edge_b, edge_v
     if grid:
         cells = cell.reshape(padded.shape)[(slice(1, -1),) * field.ndim].astype(np.int32)
         # padded flat index -> field flat index
