@@ -1,8 +1,13 @@
 import numpy as np
 import pytest
 
-from volseg.metrics import (contingency_table, directional_hamming, hamming_similarity,
-                            region_ratio, variation_of_information)
+from volseg.metrics import (
+    contingency_table,
+    directional_hamming,
+    hamming_similarity,
+    region_ratio,
+    variation_of_information,
+)
 
 
 def brute_force_directional(a, b):

@@ -227,14 +227,16 @@ def _cmd_segment(args):
         volume, path = _load(input_name, args.shape, args.dtype)
         loaded.append((volume, path))
     summaries = []
-    for volume, path in loaded:
+    for number, (volume, path) in enumerate(loaded, 1):
+        step = say if len(loaded) == 1 else (
+            lambda message, tag=f"[{number}/{len(loaded)}] ": say(tag + message))
         summary = segment_to_files(
             volume, out_dir, name=volume.name, operator=args.operator.replace("-", "_"),
             n_regions=args.regions, min_persistence=args.min_persistence,
             value_scale=args.value_scale, noise=args.noise, seed=args.seed, force=args.force,
-            source=path, say=say)
+            source=path, say=step)
         summaries.append(summary)
-        say(f"{volume.name}: wrote {', '.join(Path(p).name for p in summary['outputs'].values())}")
+        step(f"{volume.name}: wrote {', '.join(Path(p).name for p in summary['outputs'].values())}")
     if args.json:
         print(json.dumps(summaries if len(summaries) > 1 else summaries[0], indent=2))
     return 0

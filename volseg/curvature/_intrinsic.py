@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 
 
-
 def _angle(u, v):
     """Accurate angle between rows of u and v (Kahan's half-angle form)."""
     un = u / np.linalg.norm(u, axis=1, keepdims=True)
