@@ -2,6 +2,7 @@ import numpy as np
 import pytest
 
 from volseg.metrics import (
+    compare,
     contingency_table,
     directional_hamming,
     hamming_similarity,
@@ -48,6 +49,13 @@ def test_agrees_with_brute_force_on_random_labelings(rng):
         assert directional_hamming(b, a) == brute_force_directional(b, a)
         na, nb = len(np.unique(a)), len(np.unique(b))
         assert region_ratio(a, b) == min(na, nb) / max(na, nb)
+        scores = compare(a, b)
+        assert scores["directional_hamming_a_to_b"] == brute_force_directional(a, b)
+        assert scores["directional_hamming_b_to_a"] == brute_force_directional(b, a)
+        assert scores["hamming_similarity"] == pytest.approx(hamming_similarity(a, b), abs=1e-15)
+        assert scores["region_ratio"] == region_ratio(a, b)
+        assert scores["variation_of_information"] == variation_of_information(a, b)
+        assert (scores["regions_a"], scores["regions_b"]) == (na, nb)
 
 
 def test_metric_errors():

@@ -29,6 +29,7 @@ _PUBLIC = {
     "segment_volume": "volseg.segment",
     "Segmentation": "volseg.segment",
     "hamming_similarity": "volseg.metrics",
+    "compare": "volseg.metrics",
     "directional_hamming": "volseg.metrics",
     "region_ratio": "volseg.metrics",
     "variation_of_information": "volseg.metrics",

@@ -130,18 +130,19 @@ def _chunk_edges(values, vertices, lo, hi, grid, offsets, indptr, indices, cell,
 
 
 @numba.njit(cache=True, parallel=True)
-def cross_edges(values, vertices, bounds, grid, offsets, indptr, indices, cell,
+def cross_edges(values, vertices, bounds, chunks, grid, offsets, indptr, indices, cell,
                 out_a, out_b, out_v, starts, capacity, counts):
-    """`_chunk_edges` over the chunks vertices[bounds[c]:bounds[c + 1]] in parallel.
+    """`_chunk_edges` over vertices[bounds[c]:bounds[c + 1]] for c in `chunks`, in parallel.
 
-    Chunk c writes at most capacity[c] edges from starts[c] and reports its full count
-    in counts[c]; the caller reruns the chunks that overflowed. Chunking is fixed, so
-    the output does not depend on the thread count.
+    The i-th chunk writes at most capacity[i] edges from starts[i] and reports its full
+    count in counts[i]; the caller reruns the chunks that overflowed. Chunking is
+    fixed, so the output does not depend on the thread count.
     """
-    for c in numba.prange(len(bounds) - 1):
-        counts[c] = _chunk_edges(values, vertices, bounds[c], bounds[c + 1], grid, offsets,
-                                 indptr, indices, cell, out_a, out_b, out_v, starts[c],
-                                 capacity[c])
+    for i in numba.prange(len(chunks)):
+        c = chunks[i]
+        counts[i] = _chunk_edges(values, vertices, bounds[c], bounds[c + 1], grid, offsets,
+                                 indptr, indices, cell, out_a, out_b, out_v, starts[i],
+                                 capacity[i])
 
 
 @numba.njit(cache=True, nogil=True)
@@ -191,9 +192,16 @@ def break_ties(order, ranked, saddle):
         stop = start + 1
         while stop < n and ranked[stop] == ranked[start]:
             stop += 1
-        if stop - start > 1:
+        if stop - start > 32:
             run = order[start:stop].copy()
-            keys = saddle[run]
-            run = run[np.argsort(keys)]
-            order[start:stop] = run
+            order[start:stop] = run[np.argsort(saddle[run])]
+        elif stop - start > 1:  # short runs (often one vertex's edges): insertion sort
+            for i in range(start + 1, stop):
+                item = order[i]
+                key = saddle[item]
+                j = i - 1
+                while j >= start and saddle[order[j]] > key:
+                    order[j + 1] = order[j]
+                    j -= 1
+                order[j + 1] = item
         start = stop

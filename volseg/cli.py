@@ -281,15 +281,7 @@ def _cmd_compare(args):
     b = read_volume(args.labels_b).data
     if a.dtype.kind == "f" or b.dtype.kind == "f":
         raise UsageError("label volumes must hold integer labels")
-    result = {
-        "hamming_similarity": metrics.hamming_similarity(a, b),
-        "directional_hamming_a_to_b": metrics.directional_hamming(a, b),
-        "directional_hamming_b_to_a": metrics.directional_hamming(b, a),
-        "region_ratio": metrics.region_ratio(a, b),
-        "variation_of_information": metrics.variation_of_information(a, b),
-        "regions_a": int(len(np.unique(a))),
-        "regions_b": int(len(np.unique(b))),
-    }
+    result = metrics.compare(a, b)
     if args.json:
         print(json.dumps(result, indent=2))
     else:

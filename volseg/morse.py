@@ -108,30 +108,39 @@ def _csr_adjacency(adjacency, n_vertices):
 def _cross_edges(kernels, flat, real, grid, offsets, indptr, indices, cell):
     """(a, b, saddle) of the cross-cell edges, one compiled pass in fixed chunks.
 
-    Each chunk gets room for one edge per two vertices (about 3x what smooth and noisy
-    fields need); a chunk that overflows is rerun alone with exact room.
+    Each chunk gets room for one edge per two vertices (about 3x what smooth fields
+    need); the chunks that overflow (noisy fields) are rerun together with exact room.
     """
     n_chunks = min(max(1, len(real) // 4096), 1024)
     bounds = np.linspace(0, len(real), n_chunks + 1).astype(np.int64)
+    chunks = np.arange(n_chunks, dtype=np.int64)
     capacity = (bounds[1:] - bounds[:-1]) // 2 + 64
-    starts = np.concatenate([[0], np.cumsum(capacity)[:-1]]).astype(np.int64)
-    counts = np.zeros(n_chunks, dtype=np.int64)
-    total = int(capacity.sum())
-    out = [np.empty(total, dtype=np.int32), np.empty(total, dtype=np.int32),
-           np.empty(total, dtype=np.int64)]
-    kernels.cross_edges(flat, real, bounds, grid, offsets, indptr, indices, cell,
-                        *out, starts, capacity, counts)
+    out, starts, counts = _edge_pass(kernels, flat, real, bounds, chunks, capacity, grid,
+                                     offsets, indptr, indices, cell)
+    over = np.flatnonzero(counts > capacity)
+    if len(over):
+        room, room_starts, _ = _edge_pass(kernels, flat, real, bounds, over, counts[over],
+                                          grid, offsets, indptr, indices, cell)
     pieces = []
     for c in range(n_chunks):
         if counts[c] <= capacity[c]:
             pieces.append([arr[starts[c]:starts[c] + counts[c]] for arr in out])
-            continue
-        room = [np.empty(counts[c], dtype=arr.dtype) for arr in out]
-        kernels.cross_edges(flat, real, bounds[c:c + 2], grid, offsets, indptr, indices,
-                            cell, *room, np.zeros(1, np.int64), counts[c:c + 1].copy(),
-                            np.zeros(1, np.int64))
-        pieces.append(room)
+        else:
+            k = int(np.searchsorted(over, c))
+            pieces.append([arr[room_starts[k]:room_starts[k] + counts[c]] for arr in room])
     return tuple(np.concatenate([p[k] for p in pieces]) for k in range(3))
+
+
+def _edge_pass(kernels, flat, real, bounds, chunks, capacity, grid, offsets, indptr,
+               indices, cell):
+    starts = np.concatenate([[0], np.cumsum(capacity)[:-1]]).astype(np.int64)
+    counts = np.zeros(len(chunks), dtype=np.int64)
+    total = int(capacity.sum())
+    out = [np.empty(total, dtype=np.int32), np.empty(total, dtype=np.int32),
+           np.empty(total, dtype=np.int64)]
+    kernels.cross_edges(flat, real, bounds, chunks, grid, offsets, indptr, indices, cell,
+                        *out, starts, capacity.astype(np.int64), counts)
+    return out, starts, counts
 
 
 def _saddle_order(flat, saddle):

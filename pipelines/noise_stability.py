@@ -1,0 +1,409 @@
+"""Stability of segmentations under value noise (the paper's Fig. 5), on Dask.
+
+    python -m pipelines.noise_stability --out runs/fig5            # run (or resume)
+    python -m pipelines.noise_stability --out runs/fig5 --report   # run, then CSV + figure
+
+Per dataset and operator, the persistence threshold that cuts the clean volume into
+`--regions` regions (default 30, the paper's 20-40) and the value scale of the clean
+volume are fixed once. Each task adds seeded Gaussian noise (sigma = level % of the
+clean value range), recomputes curvature and segmentation with that threshold and
+scale, and scores the result against the clean segmentation (Huang-Dom similarity,
+both directional distances, region-number ratio, region count).
+
+Noise is "common random numbers": for one dataset and seed the same standard normal
+field is scaled to every level, and every operator sees the same noisy volumes, so
+curves differ by the operator and the level, not by the draw.
+
+Tasks run on dask.distributed (a LocalCluster with one single-threaded worker per
+core by default, or `--scheduler ADDRESS`). Each volume is scattered to the cluster
+once and each clean reference is computed once on the cluster; tasks depend on both.
+Every finished task is committed to ``<out>/results.sqlite`` at once, keyed by the
+parameters that define it: a rerun skips finished tasks, an interrupted run loses
+only the tasks in flight, a failed task is recorded with its error (and retried by
+the next run) without stopping the others.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import logging
+import os
+import sys
+import time
+import zlib
+from pathlib import Path
+
+import numpy as np
+
+from .store import ResultStore
+
+DEFAULT_DATASETS = ("fuel", "neghip", "silicium")
+DEFAULT_OPERATORS = ("laplace_beltrami", "weighted", "unweighted")
+DEFAULT_LEVELS = (0.0, 0.1, 0.25, 0.5, 1.0, 2.0, 5.0, 10.0)
+DEFAULT_SEEDS = 5
+KEY_COLUMNS = ("dataset", "checksum", "operator", "regions", "level", "seed")
+DB_NAME = "results.sqlite"
+
+
+class UsageError(ValueError):
+    """Bad input or usage: exit code 2."""
+
+
+# ---------------------------------------------------------------- the task itself
+
+
+def noisy_volume(volume, level, seed, dataset, value_range):
+    """The clean volume (float64) plus seeded Gaussian noise of `level` % of `value_range`.
+
+    The draw depends on (seed, dataset) only, never on the level or the worker.
+    """
+    data = np.asarray(volume, dtype=np.float64)
+    if level == 0:
+        return data.copy()
+    entropy = [int(seed), zlib.crc32(dataset.encode())]
+    normal = np.random.default_rng(np.random.SeedSequence(entropy)).standard_normal(data.shape)
+    return data + normal * (level / 100.0 * value_range)
+
+
+def _single_threaded(threads):
+    try:
+        import numba
+
+        numba.set_num_threads(max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS)))
+    except (ImportError, ValueError):  # pragma: no cover - numba is a dependency
+        pass
+
+
+def clean_reference(volume, operator, regions, threads=1):
+    """Threshold, value scale and labels of the clean segmentation into `regions`."""
+    from volseg import segment_volume
+
+    _single_threaded(threads)
+    clean = segment_volume(np.asarray(volume, dtype=np.float64), operator=operator,
+                           n_regions=regions)
+    data = np.asarray(volume)
+    return {"threshold": clean.min_persistence, "value_scale": clean.value_scale,
+            "n_regions": clean.n_regions, "labels": clean.labels,
+            "value_range": float(data.max()) - float(data.min())}
+
+
+def run_task(task, volume, reference, threads=1):
+    """One noisy segmentation scored against the clean one: the task's row.
+
+    Deterministic: the same task, volume and reference give the same row (but for
+    the time) on any worker.
+    """
+    from volseg import compare, segment_volume
+
+    _single_threaded(threads)
+    start = time.perf_counter()
+    data = noisy_volume(volume, task["level"], task["seed"], task["dataset"],
+                        reference["value_range"])
+    result = segment_volume(data, operator=task["operator"],
+                            min_persistence=reference["threshold"],
+                            value_scale=reference["value_scale"])
+    clean = reference["labels"]
+    scores = compare(clean, result.labels)
+    return {
+        **task,
+        "similarity": scores["hamming_similarity"],
+        # D_H(clean => noisy) and the reverse, as fractions of the voxels
+        "d_clean_to_noisy": scores["directional_hamming_a_to_b"] / clean.size,
+        "d_noisy_to_clean": scores["directional_hamming_b_to_a"] / clean.size,
+        "region_ratio": scores["region_ratio"],
+        "n_regions": result.n_regions,
+        "clean_regions": reference["n_regions"],
+        "threshold": reference["threshold"],
+        "value_scale": reference["value_scale"],
+        "seconds": time.perf_counter() - start,
+    }
+
+
+# ---------------------------------------------------------------- inputs
+
+
+def load_dataset(spec):
+    """(name, volume array, sha256 of the file) of a dataset name or a volume path."""
+    import data_fetch
+    from volseg.io import read_volume
+
+    path = Path(spec)
+    try:
+        if not path.exists() and spec in data_fetch.REGISTRY:
+            path = data_fetch.fetch(spec)
+        elif not path.exists():
+            raise UsageError(f"{spec}: no such file, and not a dataset name "
+                             f"(known: {', '.join(data_fetch.REGISTRY)})")
+        volume = read_volume(path)
+    except (data_fetch.DatasetError, FileNotFoundError, ValueError) as err:
+        raise UsageError(str(err)) from None
+    checksum = hashlib.sha256(path.read_bytes()).hexdigest()
+    return volume.name, np.asarray(volume), checksum
+
+
+def plan(datasets, operators, levels, seeds, regions):
+    """All tasks, as dictionaries of the key columns, in a stable order."""
+    return [
+        {"dataset": name, "checksum": checksum, "operator": operator, "regions": regions,
+         "level": float(level), "seed": seed}
+        for name, _, checksum in datasets for operator in operators
+        for level in levels for seed in range(seeds)
+    ]
+
+
+# ---------------------------------------------------------------- the run
+
+
+def _client(scheduler, workers):
+    from dask.distributed import Client, LocalCluster
+
+    if scheduler:
+        return Client(scheduler)
+    cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1,
+                           processes=True, dashboard_address=None,
+                           silence_logs=logging.ERROR)
+    return Client(cluster)
+
+
+class _Progress:
+    """One stderr line per ~5 % of the tasks (and the last), with rate and time left."""
+
+    def __init__(self, total, say):
+        self.total, self.say, self.done, self.failed = total, say, 0, 0
+        self.start = time.perf_counter()
+        self.step = max(1, total // 20)
+
+    def tick(self, failed=False):
+        self.done += 1
+        self.failed += failed
+        if self.done % self.step and self.done != self.total:
+            return
+        elapsed = time.perf_counter() - self.start
+        left = elapsed / self.done * (self.total - self.done)
+        self.say(f"{self.done}/{self.total} tasks ({self.failed} failed), "
+                 f"{elapsed:.0f} s elapsed, about {left:.0f} s left")
+
+
+def run(datasets, out_dir, *, operators=DEFAULT_OPERATORS, levels=DEFAULT_LEVELS,
+        seeds=DEFAULT_SEEDS, regions=30, scheduler=None, workers=None,
+        say=lambda message: None) -> dict:
+    """Run (or resume) the tasks not yet done; returns counts of what happened.
+
+    `datasets` are loaded `(name, volume, checksum)` triples (see `load_dataset`).
+    """
+    from dask.distributed import as_completed
+
+    out_dir = Path(out_dir)
+    tasks = plan(datasets, operators, levels, seeds, regions)
+    with ResultStore(out_dir / DB_NAME, KEY_COLUMNS) as store:
+        done = store.done_keys()
+        pending = [t for t in tasks if store.key(t) not in done]
+        counts = {"tasks": len(tasks), "already_done": len(tasks) - len(pending), "ran": 0,
+                  "failed": 0, "seconds": 0.0}
+        if not pending:
+            say(f"nothing to do: all {len(tasks)} tasks are in {store.path}")
+            return counts
+        say(f"{len(pending)} of {len(tasks)} tasks to run "
+            f"({counts['already_done']} already in {store.path})")
+        start = time.perf_counter()
+        progress = _Progress(len(pending), say)
+        client = _client(scheduler, workers)
+        try:
+            needed = {t["dataset"] for t in pending}
+            scattered = {name: client.scatter(volume, hash=False)
+                         for name, volume, _ in datasets if name in needed}
+            references = {}
+            for t in pending:
+                pair = (t["dataset"], t["operator"])
+                if pair not in references:
+                    references[pair] = client.submit(clean_reference, scattered[pair[0]],
+                                                     pair[1], regions, pure=False)
+            futures = {}
+            for t in pending:
+                name = (f"noise-{t['dataset']}-{t['operator']}-{t['level']}-{t['seed']}-"
+                        f"{t['checksum'][:8]}")
+                future = client.submit(run_task, t, scattered[t["dataset"]],
+                                       references[(t["dataset"], t["operator"])], key=name)
+                futures[future] = t
+            for future in as_completed(futures):
+                task = futures.pop(future)
+                try:
+                    row = future.result()
+                except Exception as err:  # a failed task is recorded, the others go on
+                    store.record(task, status="failed", error=f"{type(err).__name__}: {err}")
+                    counts["failed"] += 1
+                    progress.tick(failed=True)
+                else:
+                    store.record(row)
+                    counts["ran"] += 1
+                    progress.tick()
+                future.release()
+        finally:
+            cluster = getattr(client, "cluster", None)
+            client.close()
+            if cluster is not None:
+                cluster.close()
+        counts["seconds"] = time.perf_counter() - start
+        return counts
+
+
+# ---------------------------------------------------------------- the report
+
+
+_COLORS = {"laplace_beltrami": "tab:red", "weighted": "tab:blue", "unweighted": "tab:green"}
+_STYLES = ["-", "--", ":", "-."]
+
+
+def summarize(rows):
+    """Mean, standard deviation, min and max over seeds per (dataset, operator, level)."""
+    groups = {}
+    for row in rows:
+        groups.setdefault((row["dataset"], row["operator"], row["level"]), []).append(row)
+    out = []
+    for (dataset, operator, level), members in sorted(groups.items()):
+        entry = {"dataset": dataset, "operator": operator, "level": level,
+                 "seeds": len(members)}
+        for metric in ("similarity", "region_ratio", "n_regions", "seconds"):
+            values = np.array([m[metric] for m in members], dtype=float)
+            entry.update({f"{metric}_mean": values.mean(), f"{metric}_std": values.std(),
+                          f"{metric}_min": values.min(), f"{metric}_max": values.max()})
+        out.append(entry)
+    return out
+
+
+def report(out_dir) -> list[Path]:
+    """``tasks.csv`` (every row), ``summary.csv`` and ``fig5.png`` in `out_dir`."""
+    import csv
+
+    out_dir = Path(out_dir)
+    if not (out_dir / DB_NAME).exists():
+        raise UsageError(f"{out_dir / DB_NAME}: no results to report (run first)")
+    with ResultStore(out_dir / DB_NAME, KEY_COLUMNS) as store:
+        tasks_csv = store.export_csv(out_dir / "tasks.csv")
+        rows = store.rows("done")
+    if not rows:
+        raise UsageError(f"{out_dir / DB_NAME}: no finished tasks to report")
+    summary = summarize(rows)
+    summary_csv = out_dir / "summary.csv"
+    temporary = out_dir / ".summary.csv.tmp"
+    with open(temporary, "w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=list(summary[0]))
+        writer.writeheader()
+        writer.writerows(summary)
+    os.replace(temporary, summary_csv)
+    figure = _figure(summary, out_dir / "fig5.png")
+    return [tasks_csv, summary_csv, figure]
+
+
+def _figure(summary, path):
+    """Fig. 5's layout: similarity and region ratio vs noise, a line per operator and
+    dataset (colour = operator, style = dataset), mean over seeds with a min-max band.
+    Levels sit at even spacing (the paper's axis also jumps in rate)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    levels = sorted({s["level"] for s in summary})
+    position = {level: i for i, level in enumerate(levels)}
+    datasets = sorted({s["dataset"] for s in summary}, key=lambda d: (
+        DEFAULT_DATASETS.index(d) if d in DEFAULT_DATASETS else 99, d))
+    fig = Figure(figsize=(13, 4.4), dpi=100, layout="constrained")
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(1, 2)
+    for ax, metric, title in [(axes[0], "similarity", "Huang-Dom similarity to the clean result"),
+                              (axes[1], "region_ratio", "region-number ratio min/max")]:
+        for d, dataset in enumerate(datasets):
+            for operator in sorted({s["operator"] for s in summary}):
+                line = [s for s in summary if s["dataset"] == dataset and s["operator"] == operator]
+                if not line:
+                    continue
+                x = [position[s["level"]] for s in line]
+                color = _COLORS.get(operator)
+                ax.plot(x, [s[f"{metric}_mean"] for s in line], _STYLES[d % len(_STYLES)],
+                        color=color, marker="o", markersize=3,
+                        label=f"{operator.replace('_', '-')}, {dataset}")
+                ax.fill_between(x, [s[f"{metric}_min"] for s in line],
+                                [s[f"{metric}_max"] for s in line], color=color, alpha=0.12,
+                                linewidth=0)
+        ax.set_xticks(range(len(levels)), [f"{v:g}" for v in levels])
+        ax.set_xlabel("noise sigma, % of the value range (uneven steps)")
+        ax.set_ylabel(metric.replace("_", " "))
+        ax.set_title(title, fontsize=10)
+        ax.grid(alpha=0.3)
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, fontsize=7, loc="outside right center")
+    seeds = max(s["seeds"] for s in summary)
+    fig.suptitle(f"Segmentation stability under noise (mean over up to {seeds} seeds, "
+                 "band = min-max)", fontsize=11)
+    temporary = path.with_name(f".{path.name}.tmp")
+    fig.savefig(temporary, format="png")
+    os.replace(temporary, path)
+    return path
+
+
+# ---------------------------------------------------------------- command line
+
+
+def _parser():
+    p = argparse.ArgumentParser(prog="python -m pipelines.noise_stability",
+                                description=__doc__.split("\n\n")[0])
+    p.add_argument("--out", required=True, help="output folder (results.sqlite, CSV, figure)")
+    p.add_argument("--datasets", nargs="+", default=list(DEFAULT_DATASETS),
+                   metavar="NAME_OR_PATH")
+    p.add_argument("--operators", nargs="+", default=list(DEFAULT_OPERATORS),
+                   choices=["laplace_beltrami", "laplace-beltrami", "weighted", "unweighted",
+                            "intrinsic"])
+    p.add_argument("--levels", nargs="+", type=float, default=list(DEFAULT_LEVELS),
+                   metavar="PERCENT", help="noise sigma in %% of the value range")
+    p.add_argument("--seeds", type=int, default=DEFAULT_SEEDS, help="seeds per level")
+    p.add_argument("--regions", type=int, default=30,
+                   help="regions of the clean segmentation that fix the threshold")
+    p.add_argument("--workers", type=int, help="LocalCluster workers (default: cores)")
+    p.add_argument("--scheduler", metavar="ADDRESS", help="use an existing Dask scheduler")
+    p.add_argument("--report", action="store_true", help="then write CSV and the figure")
+    p.add_argument("--report-only", action="store_true", help="only write CSV and the figure")
+    p.add_argument("-q", "--quiet", action="store_true")
+    return p
+
+
+def main(argv=None) -> int:
+    args = _parser().parse_args(argv)
+
+    def say(message):
+        if not args.quiet:
+            print(f"noise-stability: {message}", file=sys.stderr, flush=True)
+
+    try:
+        if args.seeds < 1 or args.regions < 1:
+            raise UsageError("--seeds and --regions must be at least 1")
+        if args.workers is not None and args.workers < 1:
+            raise UsageError(f"--workers must be at least 1, got {args.workers}")
+        bad = [v for v in args.levels if not np.isfinite(v) or v < 0]
+        if bad:
+            raise UsageError(f"--levels must be non-negative numbers, got {bad[0]}")
+        if not args.report_only:
+            operators = list(dict.fromkeys(o.replace("-", "_") for o in args.operators))
+            datasets = [load_dataset(spec) for spec in args.datasets]
+            names = [d[0] for d in datasets]
+            if len(set(names)) != len(names):
+                raise UsageError(f"two datasets share a name: {names}")
+            counts = run(datasets, args.out, operators=operators, levels=args.levels,
+                         seeds=args.seeds, regions=args.regions, scheduler=args.scheduler,
+                         workers=args.workers, say=say)
+            say(f"ran {counts['ran']} tasks ({counts['failed']} failed) in "
+                f"{counts['seconds']:.1f} s; {counts['already_done']} were already done")
+        if args.report or args.report_only:
+            for path in report(args.out):
+                print(path)
+    except UsageError as err:
+        print(f"noise-stability: error: {err}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("noise-stability: interrupted; finished tasks are saved, rerun to continue",
+              file=sys.stderr)
+        return 130
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

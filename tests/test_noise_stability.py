@@ -1,0 +1,167 @@
+"""The noise-stability batch pipeline: determinism, Dask runs, resume, interruption."""
+
+import os
+import signal
+import sqlite3
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pipelines import noise_stability as ns
+from pipelines.store import ResultStore
+from tests.conftest import smooth_random_field
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def _volume(seed, n=24):
+    field = smooth_random_field((n, n, n), sigma=2.0, rng=np.random.default_rng(seed))
+    return np.round(255 * (field - field.min()) / np.ptp(field)).astype(np.uint8)
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("volumes")
+    paths = []
+    for seed, name in [(1, "alpha"), (2, "beta")]:
+        np.save(folder / f"{name}.npy", _volume(seed))
+        paths.append(str(folder / f"{name}.npy"))
+    return paths
+
+
+def _task(level, seed, operator="weighted", dataset="alpha"):
+    return {"dataset": dataset, "checksum": "x", "operator": operator, "regions": 8,
+            "level": level, "seed": seed}
+
+
+def _done_rows(db):
+    with ResultStore(db, ns.KEY_COLUMNS) as store:
+        return store.rows("done")
+
+
+def test_noise_is_seeded_and_shared_across_levels():
+    clean = _volume(1)
+    a = ns.noisy_volume(clean, 2.0, 3, "alpha", 255.0)
+    b = ns.noisy_volume(clean, 2.0, 3, "alpha", 255.0)
+    np.testing.assert_array_equal(a, b)
+    assert not np.array_equal(a, ns.noisy_volume(clean, 2.0, 4, "alpha", 255.0))
+    assert not np.array_equal(a, ns.noisy_volume(clean, 2.0, 3, "beta", 255.0))
+    # One standard normal field per (dataset, seed), scaled to each level.
+    c = ns.noisy_volume(clean, 4.0, 3, "alpha", 255.0)
+    np.testing.assert_allclose(c - clean, 2 * (a - clean), atol=1e-9)
+    np.testing.assert_allclose((a - clean).std(), 0.02 * 255, rtol=0.05)
+    np.testing.assert_array_equal(ns.noisy_volume(clean, 0.0, 3, "alpha", 255.0), clean)
+
+
+def test_zero_noise_gives_similarity_one_and_ratio_one():
+    clean = _volume(2)
+    for operator in ["laplace_beltrami", "weighted", "unweighted"]:
+        reference = ns.clean_reference(clean, operator, 8)
+        assert reference["n_regions"] == 8
+        row = ns.run_task(_task(0.0, 0, operator), clean, reference)
+        assert row["similarity"] == 1.0 and row["region_ratio"] == 1.0
+        assert row["n_regions"] == 8
+        assert row["d_clean_to_noisy"] == 0 and row["d_noisy_to_clean"] == 0
+        noisy = ns.run_task(_task(5.0, 0, operator), clean, reference)
+        assert noisy["similarity"] < 1.0
+
+
+def test_small_run_on_a_local_cluster_then_a_rerun_does_no_work(tiny, tmp_path, capsys):
+    out = tmp_path / "run"
+    argv = ["--out", str(out), "--datasets", *tiny, "--operators", "weighted",
+            "laplace-beltrami", "--levels", "0", "3", "--seeds", "2", "--regions", "8",
+            "--workers", "2", "--report"]
+    assert ns.main(argv) == 0
+    rows = _done_rows(out / ns.DB_NAME)
+    assert len(rows) == 2 * 2 * 2 * 2
+    assert {(r["dataset"], r["operator"]) for r in rows} == {
+        (d, o) for d in ["alpha", "beta"] for o in ["weighted", "laplace_beltrami"]}
+    for row in rows:
+        assert row["clean_regions"] == 8
+        if row["level"] == 0:
+            assert row["similarity"] == 1.0 and row["region_ratio"] == 1.0
+        else:
+            assert 0 < row["similarity"] < 1
+    # Determinism: a row computed here, in this process, equals the cluster's.
+    volume = np.load(tiny[0])
+    row = next(r for r in rows if r["dataset"] == "alpha" and r["level"] == 3.0
+               and r["seed"] == 1 and r["operator"] == "weighted")
+    local = ns.run_task({k: row[k] for k in ns.KEY_COLUMNS}, volume,
+                        ns.clean_reference(volume, "weighted", 8))
+    for metric in ["similarity", "region_ratio", "n_regions", "d_clean_to_noisy", "threshold"]:
+        assert local[metric] == row[metric]
+    # The report: every row in CSV, a summary and a real figure.
+    for name in ["tasks.csv", "summary.csv", "fig5.png"]:
+        assert (out / name).stat().st_size > 0
+    assert len((out / "tasks.csv").read_text().splitlines()) == 1 + 16
+    import matplotlib.image
+
+    image = matplotlib.image.imread(out / "fig5.png")
+    assert image.shape[0] > 300 and image[..., :3].std() > 0.05
+    # The same command again: nothing is run and no row changes.
+    before = (out / ns.DB_NAME).read_bytes()
+    capsys.readouterr()
+    assert ns.main([a for a in argv if a != "--report"]) == 0
+    assert "nothing to do" in capsys.readouterr().err
+    assert _done_rows(out / ns.DB_NAME) == rows
+    assert (out / ns.DB_NAME).read_bytes() == before
+
+
+def test_a_failing_task_is_recorded_and_the_others_finish(tmp_path):
+    good = ("good", _volume(3), "g" * 64)
+    flat = ("flat", np.zeros((16, 16), dtype=np.uint8), "f" * 64)  # 2-D: segmenting fails
+    counts = ns.run([good, flat], tmp_path, operators=["weighted"], levels=[0.0, 1.0],
+                    seeds=1, regions=5, workers=1)
+    assert counts["ran"] == 2 and counts["failed"] == 2
+    with ResultStore(tmp_path / ns.DB_NAME, ns.KEY_COLUMNS) as store:
+        failed = store.rows("failed")
+        assert {r["dataset"] for r in failed} == {"flat"}
+        assert all(r["error"] for r in failed)
+        assert len(store.rows("done")) == 2
+
+
+def _count_done(db):
+    try:
+        with sqlite3.connect(db, timeout=5) as connection:
+            return connection.execute("SELECT COUNT(*) FROM tasks WHERE status='done'").fetchone()[0]
+    except sqlite3.OperationalError:  # not created yet
+        return 0
+
+
+def test_killed_run_resumes_and_every_task_is_there_once(tiny, tmp_path):
+    out = tmp_path / "killed"
+    argv = [sys.executable, "-m", "pipelines.noise_stability", "--out", str(out),
+            "--datasets", *tiny, "--operators", "weighted", "unweighted",
+            "--levels", "0", "1", "2", "4", "--seeds", "6", "--regions", "8",
+            "--workers", "2", "-q"]
+    total = 2 * 2 * 4 * 6
+    process = subprocess.Popen(argv, cwd=REPO, start_new_session=True,
+                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    db = out / ns.DB_NAME
+    deadline = time.monotonic() + 120
+    while _count_done(db) < 3 and process.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.02)
+    os.killpg(process.pid, signal.SIGKILL)  # the client and its workers, mid-run
+    process.wait()
+    survivors = _done_rows(db)
+    assert 3 <= len(survivors) < total, "the kill did not land mid-run"
+    assert ns.main(argv[3:]) == 0
+    rows = _done_rows(db)
+    keys = [tuple(r[k] for k in ns.KEY_COLUMNS) for r in rows]
+    assert len(rows) == total and len(set(keys)) == total
+    # Work finished before the kill was kept, not redone.
+    after = {tuple(r[k] for k in ns.KEY_COLUMNS): r["seconds"] for r in rows}
+    for row in survivors:
+        assert after[tuple(row[k] for k in ns.KEY_COLUMNS)] == row["seconds"]
+
+
+def test_bad_arguments_exit_2(tmp_path, capsys):
+    assert ns.main(["--out", str(tmp_path), "--datasets", "no-such-volume"]) == 2
+    assert "no-such-volume" in capsys.readouterr().err
+    assert ns.main(["--out", str(tmp_path), "--levels", "-1"]) == 2
+    assert ns.main(["--out", str(tmp_path / "empty"), "--report-only"]) == 2
+    assert "no results" in capsys.readouterr().err
