@@ -13,7 +13,9 @@ from typing import Callable
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["TestFunction", "FUNCTIONS", "functions", "graph_mean_curvature"]
+__all__ = [
+    "TestFunction", "FUNCTIONS", "functions", "graph_mean_curvature", "normalized_rms_error",
+]
 
 
 @dataclass(frozen=True)
@@ -130,3 +132,15 @@ def functions(cubic_sign: float = -1.0) -> dict[str, TestFunction]:
 
 #: The six functions with the default reading of the cubic.
 FUNCTIONS = functions()
+
+
+def normalized_rms_error(estimate, exact, mask=None) -> float:
+    """RMS of (estimate - exact) over `mask` (default: where the estimate is finite),
+    divided by the range max - min of the exact values there (DESIGN.md section 7)."""
+    estimate, exact = np.asarray(estimate, float), np.asarray(exact, float)
+    mask = np.isfinite(estimate) if mask is None else np.asarray(mask, bool) & np.isfinite(estimate)
+    if not mask.any():
+        raise ValueError("no vertices to measure the error over")
+    spread = float(exact[mask].max() - exact[mask].min())
+    rms = float(np.sqrt(np.mean((estimate[mask] - exact[mask]) ** 2)))
+    return rms / spread if spread > 0 else rms

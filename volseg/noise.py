@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["add_value_noise"]
+__all__ = ["add_value_noise", "add_normal_noise"]
 
 
 def add_value_noise(volume: ArrayLike, percent: float, *, seed=None, reference_range=None) -> NDArray[np.float64]:
@@ -32,3 +32,39 @@ def add_value_noise(volume: ArrayLike, percent: float, *, seed=None, reference_r
         reference_range = float(data.max() - data.min())
     rng = np.random.default_rng(seed)
     return data + rng.standard_normal(data.shape) * (percent / 100.0 * reference_range)
+
+
+def add_normal_noise(vertices: ArrayLike, simplices: ArrayLike, percent: float, *, seed=None,
+                     movable=None) -> NDArray[np.float64]:
+    """Vertices moved along their unit normals by Gaussian amounts of sigma = `percent`
+    % of the mesh's mean edge length (the paper's second noise model).
+
+    Parameters
+    ----------
+    vertices : (V, n+1) array_like
+    simplices : (S, n+1) array_like of int
+    percent : float
+    seed : int or numpy Generator, optional
+    movable : (V,) array_like of bool, optional
+        Only these vertices move (e.g. not the boundary); default all.
+
+    Returns
+    -------
+    (V, n+1) ndarray of float64, a new array.
+    """
+    from .mesh import per_vertex_normals
+
+    vertices = np.array(vertices, dtype=np.float64)
+    simplices = np.asarray(simplices)
+    if not np.isfinite(percent) or percent < 0:
+        raise ValueError(f"noise `percent` must be a non-negative number, got {percent}")
+    k = simplices.shape[1]
+    pairs = np.concatenate([simplices[:, [i, j]] for i in range(k) for j in range(i + 1, k)])
+    pairs = np.unique(np.sort(pairs, axis=1), axis=0)
+    mean_edge = float(np.linalg.norm(vertices[pairs[:, 0]] - vertices[pairs[:, 1]], axis=1).mean())
+    normals = per_vertex_normals(vertices, simplices)
+    rng = np.random.default_rng(seed)
+    amount = rng.standard_normal(len(vertices)) * (percent / 100.0 * mean_edge)
+    if movable is not None:
+        amount = np.where(np.asarray(movable, dtype=bool), amount, 0.0)
+    return vertices + np.nan_to_num(normals) * amount[:, None]
