@@ -41,7 +41,7 @@ class Config:
     irregular_vertices: tuple = (729, 4913, 35937)
     irregular_seeds: tuple = (0, 1)
     diamond_sides: tuple = (16, 32)
-    diamond_eps: tuple = (0.04, 0.02, 0.01, 0.005)  # fractions of the function's range
+    diamond_eps: tuple = (0.04, 0.02, 0.01, 0.005, 0.0025, 0.001)  # of the function range
     noise_resolution: int = 33
     value_noise: tuple = (0.0, 0.1, 0.25, 0.5, 1.0, 2.0)  # % of the field range
     normal_noise: tuple = (0.0, 1.0, 2.0, 5.0, 10.0, 20.0)  # % of the mean edge length

@@ -64,6 +64,7 @@ def test_zero_noise_gives_similarity_one_and_ratio_one():
         assert reference["n_regions"] == 8
         row = ns.run_task(_task(0.0, 0, operator), clean, reference)
         assert row["similarity"] == 1.0 and row["region_ratio"] == 1.0
+        assert row["similarity_foreground"] == 1.0
         assert row["n_regions"] == 8
         assert row["d_clean_to_noisy"] == 0 and row["d_noisy_to_clean"] == 0
         noisy = ns.run_task(_task(5.0, 0, operator), clean, reference)
@@ -95,7 +96,7 @@ def test_small_run_on_a_local_cluster_then_a_rerun_does_no_work(tiny, tmp_path, 
     for metric in ["similarity", "region_ratio", "n_regions", "d_clean_to_noisy", "threshold"]:
         assert local[metric] == row[metric]
     # The report: every row in CSV, a summary and a real figure.
-    for name in ["tasks.csv", "summary.csv", "fig5.png"]:
+    for name in ["tasks.csv", "summary.csv", "fig5.png", "fig5_foreground.png"]:
         assert (out / name).stat().st_size > 0
     assert len((out / "tasks.csv").read_text().splitlines()) == 1 + 16
     import matplotlib.image
@@ -165,3 +166,16 @@ def test_bad_arguments_exit_2(tmp_path, capsys):
     assert ns.main(["--out", str(tmp_path), "--levels", "-1"]) == 2
     assert ns.main(["--out", str(tmp_path / "empty"), "--report-only"]) == 2
     assert "no results" in capsys.readouterr().err
+
+
+def test_an_existing_scheduler_is_used_and_left_running(tmp_path):
+    from dask.distributed import Client, LocalCluster
+
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                      dashboard_address=None) as cluster:
+        data = ("gamma", _volume(5, n=16), "c" * 64)
+        counts = ns.run([data], tmp_path, operators=["unweighted"], levels=[0.0, 2.0], seeds=1,
+                        regions=4, scheduler=cluster.scheduler_address)
+        assert counts["ran"] == 2 and counts["failed"] == 0
+        with Client(cluster.scheduler_address) as client:  # still up for its owner
+            assert len(client.scheduler_info()["workers"]) == 1

@@ -1,5 +1,7 @@
 """Tessellations: Kuhn grids, test hypersurfaces, irregular Delaunay and diamond meshes."""
 
+from .diamond import DiamondMesh, decode, diamond_mesh
+from .irregular import IrregularMesh, irregular_cube_mesh, lift, orient_upward
 from .kuhn import KUHN_OFFSETS_3D, kuhn_cube_mesh, kuhn_grid_mesh, kuhn_simplices
 from .shapes import cylinder, polygon, sphere, subdivide
 
@@ -12,4 +14,11 @@ __all__ = [
     "sphere",
     "cylinder",
     "subdivide",
+    "irregular_cube_mesh",
+    "IrregularMesh",
+    "lift",
+    "orient_upward",
+    "diamond_mesh",
+    "DiamondMesh",
+    "decode",
 ]

@@ -75,8 +75,8 @@ def dihedral_angles(points: NDArray, tetrahedra: NDArray) -> NDArray[np.float64]
         normals.append(n / np.linalg.norm(n, axis=1, keepdims=True))
     out = []
     for i, j in [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)]:
-        k, l = [m for m in range(4) if m not in (i, j)]
-        cos = -np.einsum("ij,ij->i", normals[k], normals[l])
+        k, m = [q for q in range(4) if q not in (i, j)]
+        cos = -np.einsum("ij,ij->i", normals[k], normals[m])
         out.append(np.degrees(np.arccos(np.clip(cos, -1, 1))))
     return np.stack(out, axis=1)
 
