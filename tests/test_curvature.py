@@ -95,7 +95,7 @@ def test_sphere_n2_pointwise_median_converges():
     # Observed medians: weighted 0.045, 0.0056, 0.0044; Laplace-Beltrami 0.088, 0.028, 0.0074.
     tolerances = {"weighted": [0.05, 0.007, 0.005], "laplace_beltrami": [0.09, 0.03, 0.008]}
     for operator, tols in tolerances.items():
-        for level, tol in zip([1, 2, 3], tols):
+        for level, tol in zip([1, 2, 3], tols, strict=True):
             v, s = tessellation.sphere(2, 1.0, level)
             assert np.median(abs(vertex_curvature(v, s, operator) - 1)) < tol, (operator, level)
 
@@ -103,7 +103,7 @@ def test_sphere_n2_pointwise_median_converges():
 def test_graph_peak_is_positive_and_bowl_negative():
     # DESIGN.md section 2: f = -0.4|x|^2 has H(0) = +0.8 (n = 3), f = +0.4|x|^2 has -0.8.
     for sign in (-1, 1):
-        v, s = tessellation.kuhn_cube_mesh(33, lambda x, y, z: sign * 0.4 * (x * x + y * y + z * z))
+        v, s = tessellation.kuhn_cube_mesh(33, lambda x, y, z, sign=sign: sign * 0.4 * (x * x + y * y + z * z))
         centre = np.argmin(np.linalg.norm(v[:, :3], axis=1))
         for operator in ORIENTED[::2]:
             assert_allclose(vertex_curvature(v, s, operator)[centre], -sign * 0.8, rtol=1e-2)

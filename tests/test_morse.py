@@ -98,8 +98,8 @@ def test_grid_and_explicit_adjacency_give_the_same_partition(rng):
     index = np.arange(f.size).reshape(f.shape)
     edges = []
     for step in offsets:
-        src = tuple(slice(max(-s, 0), n - max(s, 0)) for s, n in zip(step, f.shape))
-        dst = tuple(slice(max(s, 0), n - max(-s, 0)) for s, n in zip(step, f.shape))
+        src = tuple(slice(max(-s, 0), n - max(s, 0)) for s, n in zip(step, f.shape, strict=True))
+        dst = tuple(slice(max(s, 0), n - max(-s, 0)) for s, n in zip(step, f.shape, strict=True))
         edges.append(np.c_[index[src].ravel(), index[dst].ravel()])
     edges = np.concatenate(edges)
     grid = descending_complex(f)

@@ -216,6 +216,10 @@ def _synthetic_volume(n=48):
     return np.round(255 * f / f.max()).astype(np.uint8)
 
 
+def _tagged(say, tag):
+    return lambda message: say(tag + message)
+
+
 def _cmd_segment(args):
     say = _progress(args.quiet)
     out_dir = Path(args.out_dir)
@@ -228,8 +232,7 @@ def _cmd_segment(args):
         loaded.append((volume, path))
     summaries = []
     for number, (volume, path) in enumerate(loaded, 1):
-        step = say if len(loaded) == 1 else (
-            lambda message, tag=f"[{number}/{len(loaded)}] ": say(tag + message))
+        step = say if len(loaded) == 1 else _tagged(say, f"[{number}/{len(loaded)}] ")
         summary = segment_to_files(
             volume, out_dir, name=volume.name, operator=args.operator.replace("-", "_"),
             n_regions=args.regions, min_persistence=args.min_persistence,

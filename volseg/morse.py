@@ -217,7 +217,7 @@ def descending_complex(field: ArrayLike, *, adjacency=None, connectivity="kuhn")
     if grid:
         index_type = np.int32 if padded.size < 2**31 - 1 else np.int64
         real = np.zeros((1,) * field.ndim, dtype=index_type)
-        for axis, (size, stride) in enumerate(zip(shape, strides)):
+        for axis, (size, stride) in enumerate(zip(shape, strides, strict=True)):
             step = ((np.arange(size) + 1) * stride).astype(index_type)
             real = real + step.reshape([-1 if a == axis else 1 for a in range(field.ndim)])
         real = real.ravel()
@@ -422,8 +422,8 @@ class MorseHierarchy:
             for step in grid_offsets(len(self.shape), self._connectivity):
                 if tuple(step) <= (0,) * len(step):
                     continue
-                src = tuple(slice(max(-s, 0), n - max(s, 0)) for s, n in zip(step, self.shape))
-                dst = tuple(slice(max(s, 0), n - max(-s, 0)) for s, n in zip(step, self.shape))
+                src = tuple(slice(max(-s, 0), n - max(s, 0)) for s, n in zip(step, self.shape, strict=True))
+                dst = tuple(slice(max(s, 0), n - max(-s, 0)) for s, n in zip(step, self.shape, strict=True))
                 a, b = labels[src].ravel(), labels[dst].ravel()
                 cross = a != b
                 pairs.append(np.sort(np.stack([a[cross], b[cross]], 1), axis=1))
@@ -452,6 +452,6 @@ class MorseHierarchy:
             key = pairs[:, 0].astype(np.int64) * len(sizes) + pairs[:, 1]
             order = np.lexsort((saddles, key))
             last = np.r_[key[order][1:] != key[order][:-1], True]
-            for k, s in zip(key[order][last], saddles[order][last]):
+            for k, s in zip(key[order][last], saddles[order][last], strict=True):
                 graph.add_edge(int(k // len(sizes)), int(k % len(sizes)), saddle=float(s))
         return graph
