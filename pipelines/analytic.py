@@ -20,14 +20,14 @@ Error by valence uses the raw estimates on the irregular meshes.
 from __future__ import annotations
 
 import argparse
-import csv
-import os
 import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+from ._output import save_figure, write_csv, write_text
 
 OPERATORS = ("weighted", "laplace_beltrami")
 LABELS = {"weighted": "weighted distortion", "laplace_beltrami": "Laplace-Beltrami"}
@@ -245,26 +245,6 @@ def reductions(summary):
             for r in sorted({r for r, _ in grid})}
 
 
-def _write_csv(path, rows):
-    fields = []
-    for row in rows:
-        fields += [k for k in row if k not in fields]
-    temporary = path.with_name(f".{path.name}.tmp")
-    with open(temporary, "w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=fields)
-        writer.writeheader()
-        writer.writerows(rows)
-    os.replace(temporary, path)
-    return path
-
-
-def _save(fig, path):
-    temporary = path.with_name(f".{path.name}.tmp")
-    fig.savefig(temporary, format="png")
-    os.replace(temporary, path)
-    return path
-
-
 def _panel(ax, summary, experiment, tessellation, x_key, title, xlabel, log_x=True,
            group=None):
     """Error vs `x_key`, one line per operator (and per value of `group`, by style)."""
@@ -309,7 +289,7 @@ def figures(summary, out_dir):
            "(d) irregular meshes, raw estimates, by valence", "incident tetrahedra",
            log_x=False)
     fig.suptitle("Mean-curvature error on the six analytic functions (Fig. 2)")
-    fig2 = _save(fig, out_dir / "fig2.png")
+    fig2 = save_figure(fig, out_dir / "fig2.png")
 
     fig = Figure(figsize=(11, 4.2), dpi=100, layout="constrained")
     FigureCanvasAgg(fig)
@@ -321,7 +301,7 @@ def figures(summary, out_dir):
            log_x=False)
     resolution = next(s["resolution"] for s in summary if s["experiment"] == "value_noise")
     fig.suptitle(f"Error under noise on the {resolution}^3 Kuhn grid (Fig. 3)")
-    fig3 = _save(fig, out_dir / "fig3.png")
+    fig3 = save_figure(fig, out_dir / "fig3.png")
     return fig2, fig3
 
 
@@ -340,8 +320,8 @@ def run(out_dir, config: Config = Config(), *, cubic_sign=-1.0, say=lambda m: No
     rows += noise_errors(functions, config.noise_resolution, config.value_noise,
                          config.normal_noise, config.noise_seeds, say)
     summary = summarize(rows) + _valence_summary(valence_rows)
-    paths = [_write_csv(out_dir / "errors.csv", rows + valence_rows),
-             _write_csv(out_dir / "summary.csv", summary)]
+    paths = [write_csv(out_dir / "errors.csv", rows + valence_rows),
+             write_csv(out_dir / "summary.csv", summary)]
     paths += figures(summary, out_dir)
     lines = ["Weighted distortion vs Laplace-Beltrami on Kuhn grids "
              "(1 - E_weighted / E_LB, E = error averaged over the six functions):"]
@@ -352,10 +332,7 @@ def run(out_dir, config: Config = Config(), *, cubic_sign=-1.0, say=lambda m: No
                  "(the paper: 29 % on average)")
     lines.append(f"total time {time.perf_counter() - start:.1f} s")
     text = "\n".join(lines) + "\n"
-    temporary = out_dir / ".reduction.txt.tmp"
-    temporary.write_text(text)
-    os.replace(temporary, out_dir / "reduction.txt")
-    paths.append(out_dir / "reduction.txt")
+    paths.append(write_text(out_dir / "reduction.txt", text))
     say(text.strip())
     return paths, summary
 

@@ -36,6 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ._output import save_figure, write_csv
 from .store import ResultStore
 
 DEFAULT_DATASETS = ("fuel", "neghip", "silicium")
@@ -285,8 +286,6 @@ def summarize(rows):
 def report(out_dir) -> list[Path]:
     """``tasks.csv`` (every row), ``summary.csv``, ``fig5.png`` and
     ``fig5_foreground.png`` (similarity over the clean foreground) in `out_dir`."""
-    import csv
-
     out_dir = Path(out_dir)
     if not (out_dir / DB_NAME).exists():
         raise UsageError(f"{out_dir / DB_NAME}: no results to report (run first)")
@@ -296,13 +295,7 @@ def report(out_dir) -> list[Path]:
     if not rows:
         raise UsageError(f"{out_dir / DB_NAME}: no finished tasks to report")
     summary = summarize(rows)
-    summary_csv = out_dir / "summary.csv"
-    temporary = out_dir / ".summary.csv.tmp"
-    with open(temporary, "w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=list(summary[0]))
-        writer.writeheader()
-        writer.writerows(summary)
-    os.replace(temporary, summary_csv)
+    summary_csv = write_csv(out_dir / "summary.csv", summary)
     figure = _figure(summary, out_dir / "fig5.png")
     paths = [tasks_csv, summary_csv, figure]
     if all(np.isfinite(s["similarity_foreground_mean"]) for s in summary):
@@ -355,10 +348,7 @@ def _figure(summary, path, panels=_PANELS):
     seeds = max(s["seeds"] for s in summary)
     fig.suptitle(f"Segmentation stability under noise (mean over up to {seeds} seeds, "
                  "band = min-max)", fontsize=11)
-    temporary = path.with_name(f".{path.name}.tmp")
-    fig.savefig(temporary, format="png")
-    os.replace(temporary, path)
-    return path
+    return save_figure(fig, path)
 
 
 # ---------------------------------------------------------------- command line

@@ -7,9 +7,7 @@ says ``done`` is never run again; killing the process loses only the tasks in fl
 
 from __future__ import annotations
 
-import csv
 import json
-import os
 import sqlite3
 from pathlib import Path
 
@@ -91,15 +89,6 @@ class ResultStore:
 
     def export_csv(self, path) -> Path:
         """Write every row to `path` as CSV (atomically: temporary file, then rename)."""
-        rows = self.rows()
-        fields = list(self.key_columns) + ["status", "error"]
-        for row in rows:
-            fields += [k for k in row if k not in fields]
-        path = Path(path)
-        temporary = path.with_name(f".{path.name}.tmp")
-        with open(temporary, "w", newline="") as handle:
-            writer = csv.DictWriter(handle, fieldnames=fields)
-            writer.writeheader()
-            writer.writerows(rows)
-        os.replace(temporary, path)
-        return path
+        from ._output import write_csv
+
+        return write_csv(path, self.rows(), first=[*self.key_columns, "status", "error"])

@@ -77,6 +77,16 @@ def _find(parent, x):
 _TABLE_BITS = 12
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _emit(out_a, out_b, out_v, start, n, capacity, a, b, v):
+    """Write edge number n of a chunk if it fits; return n + 1 (the count goes on)."""
+    if n < capacity:
+        out_a[start + n] = a
+        out_b[start + n] = b
+        out_v[start + n] = v
+    return n + 1
+
+
 @numba.njit(cache=True, nogil=True)
 def _chunk_edges(values, vertices, lo, hi, grid, offsets, indptr, indices, cell,
                  out_a, out_b, out_v, start, capacity):
@@ -110,22 +120,16 @@ def _chunk_edges(values, vertices, lo, hi, grid, offsets, indptr, indices, cell,
                 if _higher(values, v, tab_v[slot]):
                     tab_v[slot] = v
                 continue
-            if tab_a[slot] >= 0:
-                if n < capacity:
-                    out_a[start + n] = tab_a[slot]
-                    out_b[start + n] = tab_b[slot]
-                    out_v[start + n] = tab_v[slot]
-                n += 1
+            if tab_a[slot] >= 0:  # evict the entry in the way
+                n = _emit(out_a, out_b, out_v, start, n, capacity,
+                          tab_a[slot], tab_b[slot], tab_v[slot])
             tab_a[slot] = a
             tab_b[slot] = b
             tab_v[slot] = v
     for slot in range(size):
         if tab_a[slot] >= 0:
-            if n < capacity:
-                out_a[start + n] = tab_a[slot]
-                out_b[start + n] = tab_b[slot]
-                out_v[start + n] = tab_v[slot]
-            n += 1
+            n = _emit(out_a, out_b, out_v, start, n, capacity,
+                      tab_a[slot], tab_b[slot], tab_v[slot])
     return n
 
 
