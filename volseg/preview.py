@@ -1,8 +1,10 @@
 """A PNG montage that shows at a glance what a segmentation found.
 
-Drawn with matplotlib's object API on the Agg canvas (no pyplot, fixed layout, no tick
-machinery): pyplot's import plus constrained layout cost about 1.3 s of the 2 s that a
-64^3 `volseg segment` took; this version renders in about 0.15 s.
+Drawn with numpy and Pillow alone: slices are coloured by lookup tables, scaled by
+nearest neighbour, and labelled with Pillow's FreeType default font. Importing and
+drawing with matplotlib cost about 0.6 s of the 1.3-1.5 s that `volseg segment
+fuel` took end to end; this costs about 0.05 s. (Pillow is already installed with
+matplotlib; it is listed as a dependency of its own for this module.)
 """
 
 from __future__ import annotations
@@ -11,83 +13,147 @@ from pathlib import Path
 
 import numpy as np
 
-# tab20, so the PNG does not depend on matplotlib's colormap registry being imported.
-_TAB20 = np.array([
+# tab20 (matplotlib's qualitative map), so region colours match the usual tools.
+TAB20 = np.array([
     (31, 119, 180), (174, 199, 232), (255, 127, 14), (255, 187, 120), (44, 160, 44),
     (152, 223, 138), (214, 39, 40), (255, 152, 150), (148, 103, 189), (197, 176, 213),
     (140, 86, 75), (196, 156, 148), (227, 119, 194), (247, 182, 210), (127, 127, 127),
     (199, 199, 199), (188, 189, 34), (219, 219, 141), (23, 190, 207), (158, 218, 229),
-]) / 255.0
+], dtype=np.float64)
+
+# ColorBrewer RdBu, reversed: blue for valleys (negative curvature), red for peaks.
+_RDBU_R = np.array([
+    (5, 48, 97), (33, 102, 172), (67, 147, 195), (146, 197, 222), (209, 229, 240),
+    (247, 247, 247), (253, 219, 199), (244, 165, 130), (214, 96, 77), (178, 24, 43),
+    (103, 0, 31),
+], dtype=np.float64)
 
 _OVERLAY_ALPHA = 0.55
+_BOX = 250  # panel size in pixels
+_GAP = 46
+_LEFT = 34
+_TOP = 58
+_BACKGROUND = (255, 255, 255)
+_INK = (20, 20, 20)
 
 
-def _gray(values, lo, hi):
-    scaled = np.clip((values - lo) / ((hi - lo) or 1.0), 0.0, 1.0)
-    return np.repeat(scaled[..., None], 3, axis=-1)
+def gray(values, lo, hi):
+    """(..., 3) uint8 gray levels of `values` scaled from [lo, hi]."""
+    scaled = np.clip((np.asarray(values, float) - lo) / ((hi - lo) or 1.0), 0.0, 1.0)
+    return np.repeat(np.round(255 * scaled)[..., None], 3, axis=-1).astype(np.uint8)
 
 
-def _overlay(values, labels, lo, hi):
-    base = _gray(values, lo, hi)
-    colors = _TAB20[labels % len(_TAB20)]
-    return (1 - _OVERLAY_ALPHA) * base + _OVERLAY_ALPHA * colors
+def diverging(values, limit):
+    """(..., 3) uint8 RdBu_r colours of `values` in [-limit, limit]."""
+    t = np.clip((np.asarray(values, float) / (limit or 1.0) + 1) / 2, 0.0, 1.0)
+    position = t * (len(_RDBU_R) - 1)
+    low = np.minimum(position.astype(int), len(_RDBU_R) - 2)
+    frac = (position - low)[..., None]
+    return np.round((1 - frac) * _RDBU_R[low] + frac * _RDBU_R[low + 1]).astype(np.uint8)
+
+
+def overlay(values, labels, lo, hi):
+    """Region colours blended over the gray volume."""
+    base = gray(values, lo, hi).astype(np.float64)
+    colours = TAB20[np.asarray(labels) % len(TAB20)]
+    return np.round((1 - _OVERLAY_ALPHA) * base + _OVERLAY_ALPHA * colours).astype(np.uint8)
+
+
+def _fit(rgb):
+    """A slice (rows = second axis upward, columns = first axis) scaled by nearest
+    neighbour to fit a _BOX square, keeping its aspect ratio."""
+    image = rgb[::-1]  # origin at the bottom left
+    rows, cols = image.shape[:2]
+    factor = _BOX / max(rows, cols)
+    r = np.minimum((np.arange(max(1, round(rows * factor))) / factor).astype(int), rows - 1)
+    c = np.minimum((np.arange(max(1, round(cols * factor))) / factor).astype(int), cols - 1)
+    return image[r][:, c]
+
+
+def _font(size):
+    from PIL import ImageFont
+
+    try:
+        return ImageFont.load_default(size=size)
+    except TypeError:  # Pillow < 10.1: fixed bitmap font
+        return ImageFont.load_default()
+
+
+def _colour_bar(canvas, draw, x, y, width, colours, ticks, label, font):
+    strip = np.repeat(colours[None], 12, axis=0)
+    from PIL import Image
+
+    canvas.paste(Image.fromarray(strip), (x, y))
+    draw.rectangle([x - 1, y - 1, x + width, y + 12], outline=_INK)
+    for fraction, text in ticks:
+        tx = x + int(round(fraction * (width - 1)))
+        draw.line([tx, y + 12, tx, y + 16], fill=_INK)
+        draw.text((tx, y + 17), text, fill=_INK, font=font, anchor="ma")
+    draw.text((x + width // 2, y + 34), label, fill=_INK, font=font, anchor="ma")
 
 
 def write_preview(path, volume, curvature, labels, *, title="") -> Path:
     """Mid slices along x, y, z: the volume, its curvature, the labels over the volume.
 
     Written to `path` as PNG (the caller handles atomic renaming). Region colours
-    cycle through the 20 tab20 colours; the legend names the first ten.
+    cycle through the 20 tab20 colours; the legend names the first ten. The
+    curvature colour scale is +-(99th percentile of |H| over the slices shown).
     """
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-    from matplotlib.patches import Rectangle
+    from PIL import Image, ImageDraw
 
     volume, curvature, labels = np.asarray(volume), np.asarray(curvature), np.asarray(labels)
     k = int(labels.max()) + 1 if labels.size else 0
     lo, hi = float(volume.min()), float(volume.max())
-    # The curvature colour scale comes from the slices shown (cheap at 256^3 and up).
     mids = [np.take(curvature, n // 2, axis=a) for a, n in enumerate(curvature.shape)]
-    lim = float(np.percentile(np.abs(np.concatenate([m.ravel() for m in mids])), 99)) or 1.0
+    limit = float(np.percentile(np.abs(np.concatenate([m.ravel() for m in mids])), 99)) or 1.0
 
-    fig = Figure(figsize=(10.5, 10.5), dpi=80)
-    FigureCanvasAgg(fig)
-    fig.suptitle(title, fontsize=11, y=0.985)
-    left, width, gap, top, height = 0.05, 0.29, 0.045, 0.93, 0.24
-    images = {}
+    rows = []
     for row, axis in enumerate("xyz"):
         index = [slice(None)] * 3
         index[row] = volume.shape[row] // 2
         index = tuple(index)
-        vol = volume[index].T.astype(float)
-        cur, lab = curvature[index].T, labels[index].T
+        vol, cur, lab = volume[index].T, curvature[index].T, labels[index].T
+        panels = [("volume", gray(vol, lo, hi)), ("curvature", diverging(cur, limit)),
+                  ("regions", overlay(vol, lab, lo, hi))]
+        rows.append((axis, index[row], [(name, _fit(rgb)) for name, rgb in panels]))
+    heights = [max(image.shape[0] for _, image in panels) for _, _, panels in rows]
+    width = _LEFT + 3 * _BOX + 2 * _GAP + 30
+    height = _TOP + sum(heights) + 3 * _GAP + 62
+    canvas = Image.new("RGB", (width, height), _BACKGROUND)
+    draw = ImageDraw.Draw(canvas)
+    small, medium, large = _font(11), _font(13), _font(17)
+    draw.text((width // 2, 14), title, fill=_INK, font=large, anchor="ma")
+    y0 = _TOP
+    for row, (axis, position, panels) in enumerate(rows):
         other = [c for c in "xyz" if c != axis]
-        panels = [
-            ("volume", dict(X=vol, cmap="gray", vmin=lo, vmax=hi)),
-            ("curvature", dict(X=cur, cmap="RdBu_r", vmin=-lim, vmax=lim)),
-            ("regions", dict(X=_overlay(vol, lab, lo, hi))),
-        ]
-        for col, (name, kwargs) in enumerate(panels):
-            ax = fig.add_axes([left + col * (width + gap), top - (row + 1) * height - row * gap,
-                               width, height])
-            images[name] = ax.imshow(origin="lower", interpolation="nearest", **kwargs)
-            ax.set_xticks([])
-            ax.set_yticks([])
-            ax.set_title(f"{name}, {axis} = {index[row]}", fontsize=9, pad=3)
-            ax.text(0.5, -0.02, f"{other[0]} \u2192", transform=ax.transAxes, ha="center",
-                    va="top", fontsize=8)
-            ax.text(-0.02, 0.5, f"{other[1]} \u2192", transform=ax.transAxes, ha="right",
-                    va="center", rotation=90, fontsize=8)
-            if row == 0 and col == 2 and k:
-                shown = min(k, 10)
-                handles = [Rectangle((0, 0), 1, 1, color=_TAB20[i % 20]) for i in range(shown)]
-                ax.legend(handles, [f"region {i}" for i in range(shown)], fontsize=6,
-                          loc="upper right", framealpha=0.7, title_fontsize=7,
-                          title=f"{k} regions" + (" (first 10)" if k > 10 else ""))
-    bar_y = top - 3 * height - 2 * gap - 0.06
-    for col, (name, label) in enumerate([("volume", "value"),
-                                         ("curvature", "mean curvature (+ peak, - valley)")]):
-        cax = fig.add_axes([left + col * (width + gap) + 0.03, bar_y, width - 0.06, 0.015])
-        fig.colorbar(images[name], cax=cax, orientation="horizontal", label=label)
-    fig.savefig(path, format="png")
+        for col, (name, image) in enumerate(panels):
+            x0 = _LEFT + col * (_BOX + _GAP)
+            canvas.paste(Image.fromarray(np.ascontiguousarray(image)), (x0, y0))
+            h, w = image.shape[:2]
+            draw.rectangle([x0 - 1, y0 - 1, x0 + w, y0 + h], outline=_INK)
+            draw.text((x0 + w // 2, y0 - 4), f"{name}, {axis} = {position}", fill=_INK,
+                      font=medium, anchor="md")
+            draw.text((x0 + w // 2, y0 + h + 3), other[0], fill=_INK, font=small, anchor="ma")
+            draw.text((x0 - 4, y0 + h // 2), other[1], fill=_INK, font=small, anchor="rm")
+        if row == 0 and k:
+            shown = min(k, 10)
+            x0 = _LEFT + 2 * (_BOX + _GAP) + _BOX - 112
+            draw.rectangle([x0 - 6, y0 + 4, x0 + 108, y0 + 28 + 14 * shown],
+                           fill=(255, 255, 255), outline=_INK)
+            draw.text((x0, y0 + 8), f"{k} regions" + (" (first 10)" if k > 10 else ""),
+                      fill=_INK, font=small)
+            for i in range(shown):
+                yy = y0 + 24 + 14 * i
+                draw.rectangle([x0, yy, x0 + 12, yy + 10], fill=tuple(int(c) for c in TAB20[i]))
+                draw.text((x0 + 18, yy - 1), f"region {i}", fill=_INK, font=small)
+        y0 += heights[row] + _GAP
+    bar_y = y0 - 8
+    ramp = np.linspace(0, 1, _BOX)
+    _colour_bar(canvas, draw, _LEFT, bar_y, _BOX, gray(ramp, 0, 1),
+                [(0, f"{lo:.4g}"), (1, f"{hi:.4g}")], "value", small)
+    _colour_bar(canvas, draw, _LEFT + _BOX + _GAP, bar_y, _BOX,
+                diverging(np.linspace(-limit, limit, _BOX), limit),
+                [(0, f"{-limit:.3g}"), (0.5, "0"), (1, f"{limit:.3g}")],
+                "mean curvature (+ peak, - valley)", small)
+    canvas.save(path, format="PNG")
     return Path(path)
