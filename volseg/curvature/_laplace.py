@@ -10,7 +10,6 @@ matrix; `cotangent_weights` forms it for those who want it.
 from __future__ import annotations
 
 import math
-
 from typing import TYPE_CHECKING
 
 import numpy as np
