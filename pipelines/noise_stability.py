@@ -29,6 +29,7 @@ import argparse
 import hashlib
 import logging
 import os
+import sqlite3
 import sys
 import time
 import zlib
@@ -407,6 +408,10 @@ def main(argv=None) -> int:
                 print(path)
     except UsageError as err:
         print(f"noise-stability: error: {err}", file=sys.stderr)
+        return 2
+    except (OSError, sqlite3.Error) as err:
+        print(f"noise-stability: error: {args.out}: cannot write the results "
+              f"({getattr(err, 'strerror', None) or err})", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("noise-stability: interrupted; finished tasks are saved, rerun to continue",

@@ -166,6 +166,12 @@ def test_bad_arguments_exit_2(tmp_path, capsys):
     assert ns.main(["--out", str(tmp_path), "--levels", "-1"]) == 2
     assert ns.main(["--out", str(tmp_path / "empty"), "--report-only"]) == 2
     assert "no results" in capsys.readouterr().err
+    blocked = tmp_path / "file"
+    blocked.write_text("not a folder")
+    volume = tmp_path / "v.npy"
+    np.save(volume, _volume(6, n=12))
+    assert ns.main(["--out", str(blocked / "run"), "--datasets", str(volume)]) == 2
+    assert "cannot write" in capsys.readouterr().err
 
 
 def test_an_existing_scheduler_is_used_and_left_running(tmp_path):
