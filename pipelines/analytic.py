@@ -40,7 +40,7 @@ class Config:
     grid_resolutions: tuple = (9, 17, 33, 65)
     irregular_vertices: tuple = (729, 4913, 35937, 274625)
     irregular_seeds: tuple = (0, 1)  # the first only above 100 k vertices (Qhull: ~1 min)
-    diamond_sides: tuple = (16, 32)
+    diamond_sides: tuple = (16, 32, 64)
     diamond_eps: tuple = (0.04, 0.02, 0.01, 0.005, 0.0025, 0.001)  # of the function range
     noise_resolution: int = 33
     value_noise: tuple = (0.0, 0.1, 0.25, 0.5, 1.0, 2.0)  # % of the field range

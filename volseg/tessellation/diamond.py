@@ -10,6 +10,7 @@ leaf tetrahedra.
 
 from __future__ import annotations
 
+import functools
 import itertools
 from dataclasses import dataclass
 
@@ -34,71 +35,87 @@ class Diamond:
     odd: tuple  # axes where centre / a is odd
 
     def _inside(self, p):
-        return all(0 <= c <= self.n for c in p)
+        return 0 <= p[0] <= self.n and 0 <= p[1] <= self.n and 0 <= p[2] <= self.n
 
-    def tetrahedra(self) -> list[tuple]:
-        """The diamond's tetrahedra (4 grid points each), clipped to the domain."""
-        v, a = np.array(self.centre), self.scale
-        p0, p1 = (np.array(p) for p in self.spine)
-        e = np.eye(3, dtype=int)
+    def _raw_tetrahedra(self) -> list:
+        """The unclipped tetrahedra, as lists of 4 integer 3-tuples (plain Python: this
+        runs once per diamond in the extraction loop)."""
+        v, a = self.centre, self.scale
+        p0, p1 = self.spine
+        moved = _moved
         out = []
         if self.kind == 0:
-            step = np.sign(p1 - p0) * 2 * a
+            step = [2 * a * ((p1[i] > p0[i]) - (p1[i] < p0[i])) for i in range(3)]
             for perm in itertools.permutations(range(3)):
                 path = [p0]
                 for axis in perm:
-                    path.append(path[-1] + step[axis] * e[axis])
+                    path.append(moved(path[-1], axis, step[axis]))
                 out.append(path)
         elif self.kind == 1:
             normal = next(i for i in range(3) if i not in self.odd)
             i, j = self.odd
-            corners = [v + s * a * e[i] + t * a * e[j] for s in (-1, 1) for t in (-1, 1)]
-            others = [c for c in corners
-                      if not (np.array_equal(c, p0) or np.array_equal(c, p1))]
-            for q in others:
+            corners = [moved(moved(v, i, s * a), j, t * a) for s in (-1, 1) for t in (-1, 1)]
+            for q in corners:
+                if q in (p0, p1):
+                    continue
                 for s in (-1, 1):
-                    out.append([p0, p1, q, v + s * a * e[normal]])
+                    out.append([p0, p1, q, moved(v, normal, s * a)])
         else:
             even = [i for i in range(3) if i not in self.odd]
             for j, k in (even, even[::-1]):
                 for s in (-1, 1):
+                    q = moved(v, j, s * a)
                     for t in (-1, 1):
-                        q = v + s * a * e[j]
-                        out.append([p0, p1, q, q + t * a * e[k]])
-        return [tuple(tuple(int(c) for c in p) for p in tet) for tet in out
+                        out.append([p0, p1, q, moved(q, k, t * a)])
+        return out
+
+    def tetrahedra_array(self) -> NDArray[np.int64]:
+        """(m, 4, 3) grid points of the diamond's tetrahedra, clipped to the domain."""
+        tets = np.array(self._raw_tetrahedra(), dtype=np.int64)
+        return tets[((tets >= 0) & (tets <= self.n)).all(axis=(1, 2))]
+
+    def tetrahedra(self) -> list[tuple]:
+        """The diamond's tetrahedra (4 grid points each), clipped to the domain."""
+        return [tet for tet in map(tuple, self._raw_tetrahedra())
                 if all(self._inside(p) for p in tet)]
 
     def parents(self) -> list[tuple]:
-        v, a = np.array(self.centre), self.scale
-        e = np.eye(3, dtype=int)
+        v, a = self.centre, self.scale
         if self.kind == 0:
             if a == self.n // 2:
                 return []
             out = []
             for s in itertools.product((-1, 1), repeat=3):
-                p = v + a * np.array(s)
+                p = (v[0] + a * s[0], v[1] + a * s[1], v[2] + a * s[2])
                 if sum((c // (2 * a)) % 2 == 1 and c % (2 * a) == 0 for c in p) == 1:
                     out.append(p)
         elif self.kind == 1:
             normal = next(i for i in range(3) if i not in self.odd)
-            out = [v + s * a * e[normal] for s in (-1, 1)]
+            out = [_moved(v, normal, s * a) for s in (-1, 1)]
         else:
             even = [i for i in range(3) if i not in self.odd]
-            out = [v + s * a * e[j] for j in even for s in (-1, 1)]
-        return [tuple(int(c) for c in p) for p in out if self._inside(p)]
+            out = [_moved(v, j, s * a) for j in even for s in (-1, 1)]
+        return [p for p in out if self._inside(p)]
 
     def children(self) -> list[tuple]:
-        v, a = np.array(self.centre), self.scale
-        e = np.eye(3, dtype=int)
+        v, a = self.centre, self.scale
         if self.kind == 0:
-            out = [v + s * a * e[i] for i in range(3) for s in (-1, 1)]
+            out = [_moved(v, i, s * a) for i in range(3) for s in (-1, 1)]
         elif self.kind == 1:
-            out = [v + s * a * e[i] for i in self.odd for s in (-1, 1)]
+            out = [_moved(v, i, s * a) for i in self.odd for s in (-1, 1)]
         else:
             if a == 1:
                 return []
-            out = [v + (a // 2) * np.array(s) for s in itertools.product((-1, 1), repeat=3)]
-        return [tuple(int(c) for c in p) for p in out if self._inside(p)]
+            h = a // 2
+            out = [(v[0] + h * s[0], v[1] + h * s[1], v[2] + h * s[2])
+                   for s in itertools.product((-1, 1), repeat=3)]
+        return [p for p in out if self._inside(p)]
+
+
+def _moved(p, axis, amount):
+    q = list(p)
+    q[axis] += amount
+    return tuple(q)
 
 
 def decode(centre, n: int) -> Diamond:
@@ -243,11 +260,12 @@ def diamond_mesh(values, eps: float) -> DiamondMesh:
         raise ValueError(f"`values` must be (2^k+1)^3 with k >= 1, got shape {values.shape}")
     split = np.zeros(values.shape, dtype=bool)
     root = (n // 2,) * 3
+    diamond = functools.lru_cache(maxsize=None)(lambda centre: decode(centre, n))
 
     def error(centre):
         if eps < 0:
             return np.inf
-        return _tets_error(values, np.array(decode(centre, n).tetrahedra(), dtype=np.int64))
+        return _tets_error(values, diamond(centre).tetrahedra_array())
 
     def split_closure(centre):
         stack = [centre]
@@ -256,13 +274,13 @@ def diamond_mesh(values, eps: float) -> DiamondMesh:
             if split[top]:
                 stack.pop()
                 continue
-            waiting = [p for p in decode(top, n).parents() if not split[p]]
+            waiting = [p for p in diamond(top).parents() if not split[p]]
             if waiting:
                 stack.extend(waiting)
                 continue
             split[top] = True
             stack.pop()
-            queue.extend(decode(top, n).children())
+            queue.extend(diamond(top).children())
 
     queue = [root]
     while queue:
