@@ -32,6 +32,7 @@ import os
 import sqlite3
 import sys
 import time
+import uuid
 import zlib
 from pathlib import Path
 
@@ -231,9 +232,10 @@ def run(datasets, out_dir, *, operators=DEFAULT_OPERATORS, levels=DEFAULT_LEVELS
                     references[pair] = client.submit(clean_reference, scattered[pair[0]],
                                                      pair[1], regions, pure=False)
             futures = {}
+            run_token = uuid.uuid4().hex[:8]  # two runs on one scheduler never share keys
             for t in pending:
                 name = (f"noise-{t['dataset']}-{t['operator']}-{t['level']}-{t['seed']}-"
-                        f"{t['checksum'][:8]}")
+                        f"{run_token}")
                 future = client.submit(run_task, t, scattered[t["dataset"]],
                                        references[(t["dataset"], t["operator"])], key=name)
                 futures[future] = t
