@@ -45,7 +45,8 @@ DEFAULT_DATASETS = ("fuel", "neghip", "silicium")
 DEFAULT_OPERATORS = ("laplace_beltrami", "weighted", "unweighted")
 DEFAULT_LEVELS = (0.0, 0.1, 0.25, 0.5, 1.0, 2.0, 5.0, 10.0)
 DEFAULT_SEEDS = 5
-KEY_COLUMNS = ("dataset", "checksum", "operator", "regions", "level", "seed")
+KEY_COLUMNS = ("dataset", "checksum", "operator", "regions", "cut", "level", "seed")
+CUTS = ("threshold", "regions")
 DB_NAME = "results.sqlite"
 
 
@@ -103,9 +104,12 @@ def run_task(task, volume, reference, threads=1):
     start = time.perf_counter()
     data = noisy_volume(volume, task["level"], task["seed"], task["dataset"],
                         reference["value_range"])
-    result = segment_volume(data, operator=task["operator"],
-                            min_persistence=reference["threshold"],
-                            value_scale=reference["value_scale"])
+    # The paper's rule holds the clean threshold; "regions" cuts the noisy hierarchy
+    # into the clean region count instead, so only the boundaries can move.
+    cut = ({"n_regions": reference["n_regions"]} if task.get("cut") == "regions"
+           else {"min_persistence": reference["threshold"]})
+    result = segment_volume(data, operator=task["operator"], value_scale=reference["value_scale"],
+                            **cut)
     clean = reference["labels"]
     scores = compare(clean, result.labels)
     # Plateaus (fuel and neghip are about half exact zeros) have zero curvature, so
@@ -154,17 +158,24 @@ def load_dataset(spec):
     return volume.name, np.asarray(volume), checksum
 
 
-def plan(datasets, operators, levels, seeds, regions):
+def plan(datasets, operators, levels, seeds, regions, cut="threshold"):
     """All tasks, as dictionaries of the key columns, in a stable order."""
     return [
         {"dataset": name, "checksum": checksum, "operator": operator, "regions": regions,
-         "level": float(level), "seed": seed}
+         "cut": cut, "level": float(level), "seed": seed}
         for name, _, checksum in datasets for operator in operators
         for level in levels for seed in range(seeds)
     ]
 
 
 # ---------------------------------------------------------------- the run
+
+
+def _store(out_dir):
+    try:
+        return ResultStore(Path(out_dir) / DB_NAME, KEY_COLUMNS)
+    except ValueError as err:
+        raise UsageError(str(err)) from None
 
 
 def _client(scheduler, workers):
@@ -198,17 +209,21 @@ class _Progress:
 
 
 def run(datasets, out_dir, *, operators=DEFAULT_OPERATORS, levels=DEFAULT_LEVELS,
-        seeds=DEFAULT_SEEDS, regions=30, scheduler=None, workers=None,
+        seeds=DEFAULT_SEEDS, regions=30, cut="threshold", scheduler=None, workers=None,
         say=lambda message: None) -> dict:
     """Run (or resume) the tasks not yet done; returns counts of what happened.
 
-    `datasets` are loaded `(name, volume, checksum)` triples (see `load_dataset`).
+    `datasets` are loaded `(name, volume, checksum)` triples (see `load_dataset`);
+    `cut` is "threshold" (the paper: the clean threshold, held fixed) or "regions"
+    (each noisy hierarchy cut into the clean region count).
     """
+    if cut not in CUTS:
+        raise UsageError(f"cut must be one of {CUTS}, got {cut!r}")
     from dask.distributed import as_completed
 
     out_dir = Path(out_dir)
-    tasks = plan(datasets, operators, levels, seeds, regions)
-    with ResultStore(out_dir / DB_NAME, KEY_COLUMNS) as store:
+    tasks = plan(datasets, operators, levels, seeds, regions, cut)
+    with _store(out_dir) as store:
         done = store.done_keys()
         pending = [t for t in tasks if store.key(t) not in done]
         counts = {"tasks": len(tasks), "already_done": len(tasks) - len(pending), "ran": 0,
@@ -269,13 +284,15 @@ _STYLES = ["-", "--", ":", "-."]
 
 
 def summarize(rows):
-    """Mean, standard deviation, min and max over seeds per (dataset, operator, level)."""
+    """Mean, standard deviation, min and max over seeds per (dataset, operator, cut,
+    level)."""
     groups = {}
     for row in rows:
-        groups.setdefault((row["dataset"], row["operator"], row["level"]), []).append(row)
+        key = (row["dataset"], row["operator"], row["cut"], row["level"])
+        groups.setdefault(key, []).append(row)
     out = []
-    for (dataset, operator, level), members in sorted(groups.items()):
-        entry = {"dataset": dataset, "operator": operator, "level": level,
+    for (dataset, operator, cut, level), members in sorted(groups.items()):
+        entry = {"dataset": dataset, "operator": operator, "cut": cut, "level": level,
                  "seeds": len(members)}
         for metric in ("similarity", "similarity_foreground", "region_ratio", "n_regions",
                        "seconds"):
@@ -287,25 +304,34 @@ def summarize(rows):
 
 
 def report(out_dir) -> list[Path]:
-    """``tasks.csv`` (every row), ``summary.csv``, ``fig5.png`` and
-    ``fig5_foreground.png`` (similarity over the clean foreground) in `out_dir`."""
+    """``tasks.csv`` (every row) and ``summary.csv`` in `out_dir`; for the paper's
+    threshold cut ``fig5.png`` and ``fig5_foreground.png`` (similarity over the clean
+    foreground), for the region-count cut ``fig5_regions.png``."""
     out_dir = Path(out_dir)
     if not (out_dir / DB_NAME).exists():
         raise UsageError(f"{out_dir / DB_NAME}: no results to report (run first)")
-    with ResultStore(out_dir / DB_NAME, KEY_COLUMNS) as store:
+    with _store(out_dir) as store:
         tasks_csv = store.export_csv(out_dir / "tasks.csv")
         rows = store.rows("done")
     if not rows:
         raise UsageError(f"{out_dir / DB_NAME}: no finished tasks to report")
     summary = summarize(rows)
     summary_csv = write_csv(out_dir / "summary.csv", summary)
-    figure = _figure(summary, out_dir / "fig5.png")
-    paths = [tasks_csv, summary_csv, figure]
-    if all(np.isfinite(s["similarity_foreground_mean"]) for s in summary):
-        paths.append(_figure(summary, out_dir / "fig5_foreground.png",
+    paths = [tasks_csv, summary_csv]
+    held = [s for s in summary if s["cut"] == "threshold"]
+    if held:
+        paths.append(_figure(held, out_dir / "fig5.png"))
+        paths.append(_figure(held, out_dir / "fig5_foreground.png",
                              panels=[("similarity_foreground",
                                       "Huang-Dom similarity, foreground voxels only"),
                                      ("region_ratio", "region-number ratio min/max")]))
+    recut = [s for s in summary if s["cut"] == "regions"]
+    if recut:
+        paths.append(_figure(recut, out_dir / "fig5_regions.png",
+                             panels=[("similarity", "Huang-Dom similarity, all voxels"),
+                                     ("similarity_foreground",
+                                      "Huang-Dom similarity, foreground voxels only")],
+                             title="each noisy result cut into the clean region count"))
     return paths
 
 
@@ -313,7 +339,7 @@ _PANELS = [("similarity", "Huang-Dom similarity to the clean result"),
            ("region_ratio", "region-number ratio min/max")]
 
 
-def _figure(summary, path, panels=_PANELS):
+def _figure(summary, path, panels=_PANELS, title="threshold of the clean result held fixed"):
     """Fig. 5's layout: similarity and region ratio vs noise, a line per operator and
     dataset (colour = operator, style = dataset), mean over seeds with a min-max band.
     Levels sit at even spacing (the paper's axis also jumps in rate)."""
@@ -327,7 +353,7 @@ def _figure(summary, path, panels=_PANELS):
     fig = Figure(figsize=(13, 4.4), dpi=100, layout="constrained")
     FigureCanvasAgg(fig)
     axes = fig.subplots(1, 2)
-    for ax, (metric, title) in zip(axes, panels, strict=True):
+    for ax, (metric, panel_title) in zip(axes, panels, strict=True):
         for d, dataset in enumerate(datasets):
             for operator in sorted({s["operator"] for s in summary}):
                 line = [s for s in summary if s["dataset"] == dataset and s["operator"] == operator]
@@ -344,13 +370,13 @@ def _figure(summary, path, panels=_PANELS):
         ax.set_xticks(range(len(levels)), [f"{v:g}" for v in levels])
         ax.set_xlabel("noise sigma, % of the value range (uneven steps)")
         ax.set_ylabel(metric.replace("_", " "))
-        ax.set_title(title, fontsize=10)
+        ax.set_title(panel_title, fontsize=10)
         ax.grid(alpha=0.3)
     handles, labels = axes[0].get_legend_handles_labels()
     fig.legend(handles, labels, fontsize=7, loc="outside right center")
     seeds = max(s["seeds"] for s in summary)
-    fig.suptitle(f"Segmentation stability under noise (mean over up to {seeds} seeds, "
-                 "band = min-max)", fontsize=11)
+    fig.suptitle(f"Segmentation stability under noise, {title} (mean over up to {seeds} "
+                 "seeds, band = min-max)", fontsize=11)
     return save_figure(fig, path)
 
 
@@ -371,6 +397,9 @@ def _parser():
     p.add_argument("--seeds", type=int, default=DEFAULT_SEEDS, help="seeds per level")
     p.add_argument("--regions", type=int, default=30,
                    help="regions of the clean segmentation that fix the threshold")
+    p.add_argument("--cut", choices=CUTS, default="threshold",
+                   help="threshold: hold the clean threshold (the paper); regions: cut "
+                   "each noisy result into the clean region count")
     p.add_argument("--workers", type=int, help="LocalCluster workers (default: cores)")
     p.add_argument("--scheduler", metavar="ADDRESS", help="use an existing Dask scheduler")
     p.add_argument("--report", action="store_true", help="then write CSV and the figure")
@@ -401,7 +430,8 @@ def main(argv=None) -> int:
             if len(set(names)) != len(names):
                 raise UsageError(f"two datasets share a name: {names}")
             counts = run(datasets, args.out, operators=operators, levels=args.levels,
-                         seeds=args.seeds, regions=args.regions, scheduler=args.scheduler,
+                         seeds=args.seeds, regions=args.regions, cut=args.cut,
+                         scheduler=args.scheduler,
                          workers=args.workers, say=say)
             say(f"ran {counts['ran']} tasks ({counts['failed']} failed) in "
                 f"{counts['seconds']:.1f} s; {counts['already_done']} were already done")

@@ -40,6 +40,13 @@ class ResultStore:
         )
         self._db.execute("CREATE TABLE IF NOT EXISTS meta (name TEXT PRIMARY KEY, data TEXT)")
         self._db.commit()
+        found = [row[1] for row in self._db.execute("PRAGMA table_info(tasks)")]
+        if tuple(found[: len(self.key_columns)]) != self.key_columns:
+            self._db.close()
+            raise ValueError(
+                f"{self.path} keys its tasks by {found[:-3]}, not {list(self.key_columns)} "
+                "(written by another version of this pipeline); use a new output folder"
+            )
 
     def close(self):
         self._db.close()

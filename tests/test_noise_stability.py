@@ -35,7 +35,7 @@ def tiny(tmp_path_factory):
 
 def _task(level, seed, operator="weighted", dataset="alpha"):
     return {"dataset": dataset, "checksum": "x", "operator": operator, "regions": 8,
-            "level": level, "seed": seed}
+            "cut": "threshold", "level": level, "seed": seed}
 
 
 def _done_rows(db):
@@ -185,3 +185,30 @@ def test_an_existing_scheduler_is_used_and_left_running(tmp_path):
         assert counts["ran"] == 2 and counts["failed"] == 0
         with Client(cluster.scheduler_address) as client:  # still up for its owner
             assert len(client.scheduler_info()["workers"]) == 1
+
+
+def test_region_count_cut_keeps_the_count_and_is_keyed_apart(tmp_path, capsys):
+    data = ("delta", _volume(7, n=20), "d" * 64)
+    for cut in ["threshold", "regions"]:
+        counts = ns.run([data], tmp_path, operators=["weighted"], levels=[0.0, 3.0], seeds=2,
+                        regions=6, cut=cut, workers=1)
+        assert counts["ran"] == 4  # the other cut's rows do not count as done
+    rows = _done_rows(tmp_path / ns.DB_NAME)
+    assert len(rows) == 8
+    recut = [r for r in rows if r["cut"] == "regions"]
+    assert all(r["n_regions"] == 6 and r["region_ratio"] == 1.0 for r in recut)
+    held = [r for r in rows if r["cut"] == "threshold" and r["level"] == 3.0]
+    assert any(r["n_regions"] != 6 for r in held)  # the held threshold lets the count move
+    paths = {p.name for p in ns.report(tmp_path)}
+    assert {"fig5.png", "fig5_foreground.png", "fig5_regions.png"} <= paths
+    with pytest.raises(SystemExit) as exit_:  # argparse: usage error, exit code 2
+        ns.main(["--out", str(tmp_path), "--cut", "sideways"])
+    assert exit_.value.code == 2
+    assert "--cut" in capsys.readouterr().err
+
+
+def test_a_results_file_with_other_keys_is_refused(tmp_path, capsys):
+    with ResultStore(tmp_path / ns.DB_NAME, ("dataset", "level")) as store:
+        store.record({"dataset": "x", "level": 1.0, "similarity": 0.5})
+    assert ns.main(["--out", str(tmp_path), "--report-only"]) == 2
+    assert "another version" in capsys.readouterr().err
