@@ -203,7 +203,7 @@ def _tets_error(values, tets):
     return worst
 
 
-def _longest_edge_bisect(grid_points, tetrahedra, split):
+def _longest_edge_bisect(tetrahedra, split):
     """Bisect every tetrahedron whose longest-edge midpoint is a split diamond, until
     none is; returns the leaves (rows of 4 grid points, integer coordinates)."""
     leaves = []
@@ -288,7 +288,7 @@ def diamond_mesh(values, eps: float) -> DiamondMesh:
         if not split[centre] and error(centre) > eps:
             split_closure(centre)
     root_tets = decode(root, n).tetrahedra()
-    leaves = _longest_edge_bisect(None, np.array(root_tets, dtype=np.int64), split)
+    leaves = _longest_edge_bisect(np.array(root_tets, dtype=np.int64), split)
     grid, inverse = np.unique(leaves.reshape(-1, 3), axis=0, return_inverse=True)
     tetrahedra = inverse.reshape(-1, 4).astype(np.intp)
     points = -1.0 + 2.0 * grid / n
