@@ -66,6 +66,25 @@ REGISTRY = {
 }
 
 
+def resolve(spec: str) -> Path:
+    """A volume path as given, or the verified local file of dataset name `spec`.
+
+    Raises
+    ------
+    DatasetError
+        `spec` is neither an existing file nor a known name, and does not look like a
+        path (no folder separator, no extension); see also `fetch`. A missing path
+        is returned as is, so the reader names it.
+    """
+    path = Path(spec)
+    if path.exists() or spec not in REGISTRY:
+        if not path.exists() and os.sep not in spec and "." not in spec:
+            raise DatasetError(f"{spec}: no such file, and not a dataset name "
+                               f"(known: {', '.join(REGISTRY)})")
+        return path
+    return fetch(spec)
+
+
 def sha256(path) -> str:
     digest = hashlib.sha256()
     with open(path, "rb") as handle:

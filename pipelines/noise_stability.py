@@ -26,7 +26,6 @@ the next run) without stopping the others.
 from __future__ import annotations
 
 import argparse
-import hashlib
 import logging
 import os
 import sqlite3
@@ -144,18 +143,12 @@ def load_dataset(spec):
     import data_fetch
     from volseg.io import read_volume
 
-    path = Path(spec)
     try:
-        if not path.exists() and spec in data_fetch.REGISTRY:
-            path = data_fetch.fetch(spec)
-        elif not path.exists():
-            raise UsageError(f"{spec}: no such file, and not a dataset name "
-                             f"(known: {', '.join(data_fetch.REGISTRY)})")
+        path = data_fetch.resolve(spec)
         volume = read_volume(path)
-    except (data_fetch.DatasetError, FileNotFoundError, ValueError) as err:
+    except (FileNotFoundError, ValueError) as err:  # DatasetError is a ValueError
         raise UsageError(str(err)) from None
-    checksum = hashlib.sha256(path.read_bytes()).hexdigest()
-    return volume.name, np.asarray(volume), checksum
+    return volume.name, np.asarray(volume), data_fetch.sha256(path)
 
 
 def plan(datasets, operators, levels, seeds, regions, cut="threshold"):

@@ -6,7 +6,6 @@ Exit codes: 0 done, 2 bad input or usage (one line on stderr), 1 unexpected fail
 from __future__ import annotations
 
 import argparse
-import hashlib
 import json
 import os
 import shutil
@@ -81,30 +80,14 @@ def _progress(quiet):
     return say
 
 
-def _resolve(input_name: str) -> Path:
-    """A path as given, or the verified file of a named dataset."""
+def _load(input_name, shape=None, dtype=None):
+    """(Volume, path) of a volume file or a named dataset (`data_fetch.resolve`)."""
     import data_fetch
 
-    path = Path(input_name)
-    if path.exists() or input_name not in data_fetch.REGISTRY:
-        if not path.exists() and os.sep not in input_name and "." not in input_name:
-            raise UsageError(
-                f"{input_name}: no such file, and not a dataset name "
-                f"(known: {', '.join(data_fetch.REGISTRY)})"
-            )
-        return path
-    return data_fetch.fetch(input_name)
-
-
-def _load(input_name, shape=None, dtype=None):
     from .io import read_volume
 
-    path = _resolve(input_name)
+    path = data_fetch.resolve(input_name)
     return read_volume(path, shape=shape, dtype=dtype), path
-
-
-def _checksum(path: Path) -> str:
-    return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
 def _check_out_dir(out_dir: Path):
@@ -130,6 +113,8 @@ def segment_to_files(volume, out_dir, *, name, operator="weighted", n_regions=No
     All four files are written to temporary names first and renamed at the end, so a
     failure leaves no partial output. Returns the summary dictionary.
     """
+    import data_fetch
+
     from .io import write_volume
     from .noise import add_value_noise
     from .preview import write_preview
@@ -159,7 +144,7 @@ def segment_to_files(volume, out_dir, *, name, operator="weighted", n_regions=No
     summary = {
         "volseg_version": __version__,
         "input": str(source) if source else name,
-        "input_sha256": _checksum(Path(source)) if source else None,
+        "input_sha256": data_fetch.sha256(source) if source else None,
         "shape": list(labels.shape),
         "spacing": list(result.spacing),
         "operator": result.operator,
