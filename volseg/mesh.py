@@ -391,6 +391,24 @@ def orient(simplices: ArrayLike) -> NDArray[np.intp]:
     return out
 
 
+def edges(simplices: ArrayLike) -> NDArray[np.intp]:
+    """(E, 2) the mesh's edges, each once, smaller vertex index first."""
+    simplices = np.asarray(simplices)
+    k = simplices.shape[1]
+    pairs = np.concatenate([simplices[:, [i, j]] for i in range(k) for j in range(i + 1, k)])
+    return np.unique(np.sort(pairs, axis=1), axis=0)
+
+
+def vertex_adjacency(simplices: ArrayLike, n_vertices: int):
+    """(V, V) scipy.sparse CSR matrix: 1 where two vertices share an edge, else 0."""
+    from scipy import sparse
+
+    pairs = edges(simplices)
+    rows = np.concatenate([pairs[:, 0], pairs[:, 1]])
+    cols = np.concatenate([pairs[:, 1], pairs[:, 0]])
+    return sparse.csr_matrix((np.ones(len(rows)), (rows, cols)), shape=(n_vertices, n_vertices))
+
+
 def ring_average(values: ArrayLike, simplices: ArrayLike, iterations: int = 1) -> NDArray[np.float64]:
     """`iterations` rounds of replacing each vertex value by the mean over its closed
     1-ring (itself and its edge neighbours); NaN values are left out of the means
@@ -401,13 +419,8 @@ def ring_average(values: ArrayLike, simplices: ArrayLike, iterations: int = 1) -
     from scipy import sparse
 
     values = np.array(values, dtype=np.float64)
-    simplices = np.asarray(simplices)
     n = len(values)
-    k = simplices.shape[1]
-    pairs = np.concatenate([simplices[:, [i, j]] for i in range(k) for j in range(k) if i != j])
-    ring = sparse.csr_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
-    ring.data[:] = 1.0
-    ring = (ring + sparse.identity(n, format="csr")).tocsr()
+    ring = (vertex_adjacency(simplices, n) + sparse.identity(n, format="csr")).tocsr()
     missing = ~np.isfinite(values)
     known = (~missing).astype(np.float64)
     counts = ring @ known

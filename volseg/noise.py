@@ -52,15 +52,13 @@ def add_normal_noise(vertices: ArrayLike, simplices: ArrayLike, percent: float, 
     -------
     (V, n+1) ndarray of float64, a new array.
     """
-    from .mesh import per_vertex_normals
+    from .mesh import edges, per_vertex_normals
 
     vertices = np.array(vertices, dtype=np.float64)
     simplices = np.asarray(simplices)
     if not np.isfinite(percent) or percent < 0:
         raise ValueError(f"noise `percent` must be a non-negative number, got {percent}")
-    k = simplices.shape[1]
-    pairs = np.concatenate([simplices[:, [i, j]] for i in range(k) for j in range(i + 1, k)])
-    pairs = np.unique(np.sort(pairs, axis=1), axis=0)
+    pairs = edges(simplices)
     mean_edge = float(np.linalg.norm(vertices[pairs[:, 0]] - vertices[pairs[:, 1]], axis=1).mean())
     normals = per_vertex_normals(vertices, simplices)
     rng = np.random.default_rng(seed)

@@ -181,13 +181,9 @@ def _delaunay(Delaunay, points):
 
 def _laplacian_smooth(points, tetrahedra, fixed, iterations):
     """Move each free point to the mean of its edge neighbours, `iterations` times."""
-    from scipy import sparse
+    from ..mesh import vertex_adjacency
 
-    pairs = np.concatenate([tetrahedra[:, [i, j]] for i in range(4) for j in range(4) if i != j])
-    n = len(points)
-    adjacency = sparse.csr_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])),
-                                  shape=(n, n))
-    adjacency.data[:] = 1.0
+    adjacency = vertex_adjacency(tetrahedra, len(points))
     degree = np.asarray(adjacency.sum(axis=1)).ravel()
     free = ~fixed
     points = points.copy()
