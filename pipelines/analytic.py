@@ -155,7 +155,7 @@ def diamond_errors(functions, sides, eps_fractions, say):
 def noise_errors(functions, resolution, value_levels, normal_levels, seeds, say):
     from volseg.analytic import normalized_rms_error
     from volseg.curvature import grid_curvature, vertex_curvature
-    from volseg.noise import add_normal_noise
+    from volseg.noise import add_normal_noise, add_value_noise
     from volseg.tessellation import kuhn_cube_mesh
 
     rows = []
@@ -170,8 +170,8 @@ def noise_errors(functions, resolution, value_levels, normal_levels, seeds, say)
         for seed in seeds:
             rng_entropy = [seed, sum(map(ord, name))]
             for level in value_levels:
-                normal = np.random.default_rng(rng_entropy).standard_normal(values.shape)
-                noisy = values + normal * level / 100.0 * spread
+                noisy = add_value_noise(values, level, seed=np.random.default_rng(rng_entropy),
+                                        reference_range=spread)
                 for operator in OPERATORS:
                     estimate = grid_curvature(noisy, operator, spacing=(h, h, h), value_scale=1.0)
                     rows.append({"experiment": "value_noise", "tessellation": "grid",

@@ -64,9 +64,11 @@ def noisy_volume(volume, level, seed, dataset, value_range):
     data = np.asarray(volume, dtype=np.float64)
     if level == 0:
         return data.copy()
+    from volseg.noise import add_value_noise
+
     entropy = [int(seed), zlib.crc32(dataset.encode())]
-    normal = np.random.default_rng(np.random.SeedSequence(entropy)).standard_normal(data.shape)
-    return data + normal * (level / 100.0 * value_range)
+    return add_value_noise(data, level, seed=np.random.default_rng(np.random.SeedSequence(entropy)),
+                           reference_range=value_range)
 
 
 def _single_threaded(threads):
