@@ -6,17 +6,16 @@ Exit codes: 0 done, 2 bad input or usage (one line on stderr), 1 unexpected fail
 from __future__ import annotations
 
 import argparse
-import json
 import os
-import shutil
+import signal
 import sys
-import tempfile
 import time
-from concurrent.futures import ThreadPoolExecutor
+from contextlib import ExitStack
 from pathlib import Path
 
 import numpy as np
 
+from . import _json
 from ._version import __version__
 
 OPERATOR_CHOICES = ["weighted", "unweighted", "laplace-beltrami", "intrinsic"]
@@ -51,6 +50,10 @@ def _get_parser() -> argparse.ArgumentParser:
                      help="add Gaussian noise, sigma in percent of the value range")
     seg.add_argument("--seed", type=int, default=0, help="seed of --noise (default 0)")
     seg.add_argument("--force", action="store_true", help="overwrite existing outputs")
+    seg.add_argument("--wait", action="store_true",
+                     help="wait for another volseg writing the same outputs (default: fail)")
+    seg.add_argument("--allow-external-data", action="store_true",
+                     help="let a detached header (.nhdr, .dat) name a data file outside its folder")
     seg.add_argument("--json", action="store_true", help="print the summaries as JSON on stdout")
     seg.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
 
@@ -59,12 +62,14 @@ def _get_parser() -> argparse.ArgumentParser:
 
     demo = sub.add_parser("demo", help="segment a built-in synthetic volume (offline)")
     demo.add_argument("-o", "--out-dir", default="volseg-demo")
+    demo.add_argument("--force", action="store_true", help="overwrite existing outputs")
     demo.add_argument("-q", "--quiet", action="store_true")
 
     info = sub.add_parser("info", help="describe a volume file or dataset")
     info.add_argument("input", metavar="INPUT")
     info.add_argument("--shape", type=int, nargs=3, metavar=("X", "Y", "Z"))
     info.add_argument("--dtype")
+    info.add_argument("--allow-external-data", action="store_true")
 
     compare = sub.add_parser("compare", help="compare two label volumes (Huang-Dom)")
     compare.add_argument("labels_a", metavar="LABELS_A")
@@ -80,14 +85,14 @@ def _progress(quiet):
     return say
 
 
-def _load(input_name, shape=None, dtype=None):
-    """(Volume, path) of a volume file or a named dataset (`data_fetch.resolve`)."""
+def _load(input_name, shape=None, dtype=None, allow_external_data=False):
+    """The Volume of a volume file or a named dataset (`data_fetch.resolve`)."""
     import data_fetch
 
     from .io import read_volume
 
     path = data_fetch.resolve(input_name)
-    return read_volume(path, shape=shape, dtype=dtype), path
+    return read_volume(path, shape=shape, dtype=dtype, allow_external_data=allow_external_data)
 
 
 def _check_out_dir(out_dir: Path):
@@ -99,93 +104,47 @@ def _check_out_dir(out_dir: Path):
         raise UsageError(f"{out_dir}: the output folder is not writable")
 
 
-def _outputs(out_dir: Path, name: str) -> dict:
-    return {kind: out_dir / f"{name}_{kind}{ext}" for kind, ext in
-            [("labels", ".nii.gz"), ("curvature", ".nii.gz"), ("summary", ".json"),
-             ("preview", ".png")]}
+def _output_sets(volumes, out_dir, *, force, wait):
+    """One locked, checked `OutputSet` per volume; two inputs with one stem are refused
+    before anything is computed."""
+    from .io import OutputSet
+    from .outputs import output_names
+
+    seen = {}
+    for volume in volumes:
+        if volume.name in seen:
+            raise UsageError(
+                f"{seen[volume.name]} and {volume.path or volume.name} would both write "
+                f"{out_dir / volume.name}_*; segment them into different folders")
+        seen[volume.name] = volume.path or volume.name
+    return [OutputSet(out_dir, v.name, output_names(v.name), force=force, wait=wait)
+            for v in volumes]
 
 
-def segment_to_files(volume, out_dir, *, name, operator="weighted", n_regions=None,
-                     min_persistence=None, value_scale=None, noise=None, seed=0, force=False,
-                     source=None, say=lambda message: None) -> dict:
-    """Segment `volume` and write labels, curvature, summary and preview into `out_dir`.
-
-    All four files are written to temporary names first and renamed at the end, so a
-    failure leaves no partial output. Returns the summary dictionary.
-    """
-    import data_fetch
-
-    from .io import write_volume
+def segment_to_files(volume, outputs, *, operator="weighted", n_regions=None,
+                     min_persistence=None, value_scale=None, noise=None, seed=0,
+                     say=lambda message: None) -> dict:
+    """Segment `volume` and write its output set (an entered `OutputSet`); returns the summary."""
     from .noise import add_value_noise
-    from .preview import write_preview
+    from .outputs import files_sha256, summary, write_segmentation
     from .segment import segment_volume
 
-    out_dir = Path(out_dir)
-    targets = _outputs(out_dir, name)
-    existing = [str(p) for p in targets.values() if p.exists()]
-    if existing and not force:
-        raise UsageError(f"{existing[0]} exists (and {len(existing) - 1} more outputs); "
-                         "use --force to overwrite")
     started = time.perf_counter()
+    name = volume.name
     data = np.asarray(volume)
     if noise:
         data = add_value_noise(data, noise, seed=seed)
     say(f"{name}: curvature ({operator}) and Morse complex of a {'x'.join(map(str, data.shape))} volume")
     result = segment_volume(data, operator=operator, n_regions=n_regions,
                             min_persistence=min_persistence, value_scale=value_scale,
-                            spacing=getattr(volume, "spacing", None))
-    labels = result.labels
-    sizes = np.bincount(labels.ravel(), minlength=result.n_regions)
-    regions = []
-    for region, top in enumerate(result.region_maxima()):
-        x, y, z = (int(c) for c in np.unravel_index(top, labels.shape))
-        regions.append({"label": region, "size": int(sizes[region]), "maximum": [x, y, z],
-                        "curvature_at_maximum": float(result.curvature[x, y, z])})
-    summary = {
-        "volseg_version": __version__,
-        "input": str(source) if source else name,
-        "input_sha256": data_fetch.sha256(source) if source else None,
-        "shape": list(labels.shape),
-        "spacing": list(result.spacing),
-        "operator": result.operator,
-        "value_scale": result.value_scale,
-        "noise_percent": noise or 0.0,
-        "seed": seed if noise else None,
-        "n_regions": result.n_regions,
-        "requested_regions": n_regions,
-        "min_persistence": result.min_persistence,
-        "n_maxima": int(len(result.hierarchy.maxima)),
-        "regions": regions,
-        "outputs": {kind: str(p) for kind, p in targets.items()},
-        "timings_s": {k: round(v, 4) for k, v in result.timings.items()},
-    }
+                            spacing=volume.spacing)
+    info = summary(result, name=name, source=volume.path, checksum=files_sha256(volume.files),
+                   files=volume.files, frame=volume.frame, noise=noise, seed=seed,
+                   requested_regions=n_regions)
     say(f"{name}: {result.n_regions} regions from {len(result.hierarchy.maxima)} maxima; writing")
-    # Everything goes into a hidden staging folder first and is renamed into place at
-    # the end, so a failure (or Ctrl-C) leaves no partial output.
-    staging = Path(tempfile.mkdtemp(prefix=".volseg-", dir=out_dir))
-    try:
-        # Labels in the smallest unsigned type that holds them (what label viewers
-        # expect); the three writers run at once (zlib releases the GIL).
-        label_type = np.min_scalar_type(max(result.n_regions - 1, 0))
-        with ThreadPoolExecutor(3) as pool:
-            jobs = [
-                pool.submit(write_volume, staging / targets["labels"].name,
-                            labels.astype(label_type), spacing=result.spacing),
-                pool.submit(write_volume, staging / targets["curvature"].name,
-                            result.curvature.astype(np.float32), spacing=result.spacing),
-                pool.submit(write_preview, staging / targets["preview"].name, data,
-                            result.curvature, labels,
-                            title=f"{name}: {result.n_regions} regions, {result.operator} curvature"),
-            ]
-            for job in jobs:
-                job.result()
-        summary["timings_s"]["total"] = round(time.perf_counter() - started, 4)
-        (staging / targets["summary"].name).write_text(json.dumps(summary, indent=2))
-        for target in targets.values():
-            os.replace(staging / target.name, target)
-    finally:
-        shutil.rmtree(staging, ignore_errors=True)
-    return summary
+    info["timings_s"]["total"] = round(time.perf_counter() - started, 4)
+    return write_segmentation(outputs, result, data, info, frame=volume.frame,
+                              title=f"{name}: {result.n_regions} regions, {result.operator} curvature")
 
 
 def _synthetic_volume(n=48):
@@ -205,28 +164,40 @@ def _tagged(say, tag):
     return lambda message: say(tag + message)
 
 
+def _segment_all(volumes, out_dir, args, say, **options):
+    """Lock and check every output set, then segment and write each volume."""
+    sets = _output_sets(volumes, out_dir, force=args.force, wait=getattr(args, "wait", False))
+    summaries = []
+    with ExitStack() as stack:
+        for outputs in sets:
+            stack.enter_context(outputs)
+            for line in outputs.recovered:
+                say(f"{outputs.folder}: {line}")
+        for number, (volume, outputs) in enumerate(zip(volumes, sets, strict=True), 1):
+            step = say if len(volumes) == 1 else _tagged(say, f"[{number}/{len(volumes)}] ")
+            summary = segment_to_files(volume, outputs, say=step, **options)
+            summaries.append(summary)
+            step(f"{volume.name}: wrote {', '.join(Path(p).name for p in summary['outputs'].values())}")
+    return summaries
+
+
 def _cmd_segment(args):
     say = _progress(args.quiet)
     out_dir = Path(args.out_dir)
-    _check_out_dir(out_dir)
     if args.regions is not None and args.regions < 1:
         raise UsageError(f"--regions must be at least 1, got {args.regions}")
-    loaded = []
-    for input_name in args.inputs:  # read and check everything before computing anything
-        volume, path = _load(input_name, args.shape, args.dtype)
-        loaded.append((volume, path))
-    summaries = []
-    for number, (volume, path) in enumerate(loaded, 1):
-        step = say if len(loaded) == 1 else _tagged(say, f"[{number}/{len(loaded)}] ")
-        summary = segment_to_files(
-            volume, out_dir, name=volume.name, operator=args.operator.replace("-", "_"),
-            n_regions=args.regions, min_persistence=args.min_persistence,
-            value_scale=args.value_scale, noise=args.noise, seed=args.seed, force=args.force,
-            source=path, say=step)
-        summaries.append(summary)
-        step(f"{volume.name}: wrote {', '.join(Path(p).name for p in summary['outputs'].values())}")
+    if args.min_persistence is not None and not args.min_persistence >= 0:
+        raise UsageError(f"--min-persistence must be a non-negative number, got {args.min_persistence}")
+    # Read and check every input before writing or computing anything.
+    volumes = [_load(name, args.shape, args.dtype, args.allow_external_data)
+               for name in args.inputs]
+    _check_out_dir(out_dir)
+    summaries = _segment_all(
+        volumes, out_dir, args, say, operator=args.operator.replace("-", "_"),
+        n_regions=args.regions, min_persistence=args.min_persistence,
+        value_scale=args.value_scale, noise=args.noise, seed=args.seed)
     if args.json:
-        print(json.dumps(summaries if len(summaries) > 1 else summaries[0], indent=2))
+        print(_json.dumps(summaries if len(summaries) > 1 else summaries[0], indent=2))
     return 0
 
 
@@ -244,7 +215,7 @@ def _cmd_demo(args):
     out_dir = Path(args.out_dir)
     _check_out_dir(out_dir)
     volume = Volume(_synthetic_volume(), name="demo", source="built-in synthetic")
-    summary = segment_to_files(volume, out_dir, name="demo", force=True, say=_progress(args.quiet))
+    summary, = _segment_all([volume], out_dir, args, _progress(args.quiet))
     print(f"segmented a built-in {'x'.join(map(str, volume.shape))} volume into "
           f"{summary['n_regions']} regions; wrote:")
     for path in summary["outputs"].values():
@@ -253,29 +224,36 @@ def _cmd_demo(args):
 
 
 def _cmd_info(args):
-    volume, path = _load(args.input, args.shape, args.dtype)
+    volume = _load(args.input, args.shape, args.dtype, args.allow_external_data)
     data = volume.data
-    print(f"{path}\n  shape (x, y, z): {data.shape}\n  dtype: {data.dtype}\n"
+    frame = volume.frame
+    affine = "\n".join("    " + " ".join(f"{v:10.4g}" for v in row) for row in frame.affine)
+    print(f"{volume.path}\n  shape (x, y, z): {data.shape}\n  dtype: {data.dtype}\n"
           f"  range: {data.min()} .. {data.max()} (mean {data.mean():.4g})\n"
-          f"  spacing: {volume.spacing}\n  read as: {volume.source}")
+          f"  spacing: {volume.spacing}\n  voxel-to-world affine (RAS+, sform code "
+          f"{frame.sform_code}, qform code {frame.qform_code}):\n{affine}\n"
+          f"  read as: {volume.source}\n  files: {', '.join(map(str, volume.files))}")
     return 0
 
 
 def _cmd_compare(args):
     from . import metrics
-    from .io import read_volume
 
-    a = read_volume(args.labels_a).data
-    b = read_volume(args.labels_b).data
+    a = _load(args.labels_a).data
+    b = _load(args.labels_b).data
     if a.dtype.kind == "f" or b.dtype.kind == "f":
         raise UsageError("label volumes must hold integer labels")
     result = metrics.compare(a, b)
     if args.json:
-        print(json.dumps(result, indent=2))
+        print(_json.dumps(result, indent=2))
     else:
         for key, value in result.items():
             print(f"{key}: {value:.6g}" if isinstance(value, float) else f"{key}: {value}")
     return 0
+
+
+def _raise_interrupt(signum, frame):
+    raise KeyboardInterrupt
 
 
 def main(argv=None) -> int:
@@ -286,17 +264,32 @@ def main(argv=None) -> int:
         return int(exit_.code or 0)
     command = {"segment": _cmd_segment, "fetch": _cmd_fetch, "demo": _cmd_demo,
                "info": _cmd_info, "compare": _cmd_compare}[args.command]
+    # SIGTERM unwinds like Ctrl-C: staging folders are removed, locks released.
+    previous = signal.signal(signal.SIGTERM, _raise_interrupt)
     try:
         return command(args)
-    except (ValueError, FileNotFoundError, PermissionError, IsADirectoryError) as err:
-        print(f"volseg: error: {err}", file=sys.stderr)
+    except (ValueError, OSError) as err:  # VolumeFileError, OutputError, UsageError, paths
+        print(f"volseg: error: {_one_line(err)}", file=sys.stderr)
+        return 2
+    except MemoryError:
+        print("volseg: error: not enough memory for this volume", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("volseg: interrupted", file=sys.stderr)
         return 130
     except Exception as err:  # noqa: BLE001 - the last resort, reported as such
-        print(f"volseg: unexpected failure: {type(err).__name__}: {err}", file=sys.stderr)
+        print(f"volseg: unexpected failure (a bug; please report it): {type(err).__name__}: "
+              f"{_one_line(err)}", file=sys.stderr)
         return 1
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _one_line(err) -> str:
+    """An exception as one line: OSErrors with their file, everything else as is."""
+    if isinstance(err, OSError) and err.filename and err.strerror:
+        return f"{err.filename}: {err.strerror}"
+    return " ".join(str(err).split())
 
 
 if __name__ == "__main__":

@@ -19,6 +19,7 @@ __all__ = [
     "faces",
     "boundary_faces",
     "boundary_vertices",
+    "pinched_vertices",
     "simplex_volumes",
     "simplex_normals",
     "per_vertex_normals",
@@ -45,8 +46,8 @@ def check_mesh(
     Raises
     ------
     ValueError
-        Wrong shapes, non-finite coordinates, indices out of range, or a simplex
-        that repeats a vertex.
+        Wrong shapes, no simplices, non-finite coordinates, indices out of range, or
+        a simplex that repeats a vertex.
     """
     vertices = np.asarray(vertices, dtype=np.float64)
     simplices = np.asarray(simplices)
@@ -58,6 +59,8 @@ def check_mesh(
             f"`simplices` must be an (S, n+1) array with n >= 1, got shape {simplices.shape}"
         )
     n = simplices.shape[1] - 1
+    if len(simplices) == 0:
+        raise ValueError("the mesh has no simplices (`simplices` is empty)")
     if codimension is not None and d - n != codimension:
         raise ValueError(
             f"`simplices` must be (S, {d - codimension + 1}) for vertices in R^{d}, "
@@ -214,6 +217,39 @@ def boundary_vertices(simplices: ArrayLike, n_vertices: int | None = None) -> ND
     mask = np.zeros(n_vertices, dtype=bool)
     mask[boundary_faces(simplices).ravel()] = True
     return mask
+
+
+def pinched_vertices(simplices: ArrayLike, n_vertices: int | None = None,
+                     mesh_faces: Faces | None = None) -> NDArray[np.intp]:
+    """Vertices whose star falls apart: its simplices are not connected through the
+    (n-1)-faces around the vertex (two closed surfaces touching at a point, two
+    solids sharing only an edge). Curvature has no meaning there.
+
+    Parameters
+    ----------
+    simplices : (S, n+1) array_like of int
+    n_vertices : int, optional
+    mesh_faces : Faces, optional
+        ``faces(simplices)``, if already computed.
+
+    Returns
+    -------
+    (P,) ndarray of intp
+        Sorted indices of the pinched vertices (empty for a manifold).
+    """
+    from ._star_kernels import star_pieces
+
+    simplices = np.asarray(simplices, dtype=np.intp)
+    if n_vertices is None:
+        n_vertices = int(simplices.max()) + 1 if simplices.size else 0
+    if len(simplices) == 0:
+        return np.zeros(0, dtype=np.intp)
+    f = mesh_faces if mesh_faces is not None else faces(simplices, n_vertices)
+    interior = f.interior
+    pieces = np.zeros(n_vertices, dtype=np.int8)
+    star_pieces(simplices, np.ascontiguousarray(f.simplices[interior]),
+                np.ascontiguousarray(f.opposite[interior]), n_vertices, pieces)
+    return np.flatnonzero(pieces > 1)
 
 
 def _det(matrices: NDArray[np.float64]) -> NDArray[np.float64]:

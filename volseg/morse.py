@@ -39,7 +39,34 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["descending_complex", "MorseHierarchy", "grid_offsets"]
+__all__ = ["descending_complex", "MorseHierarchy", "grid_offsets", "check_cut"]
+
+
+def check_cut(min_persistence=None, n_regions=None) -> tuple:
+    """The checked cut of a hierarchy, ``(min_persistence, n_regions)``, at most one given.
+
+    `n_regions` must be a positive integer (not a float or a bool); `min_persistence`
+    a non-negative number (``inf`` merges everything).
+    """
+    import numbers
+
+    if min_persistence is not None and n_regions is not None:
+        raise ValueError("give `min_persistence` or `n_regions`, not both")
+    if n_regions is not None:
+        if isinstance(n_regions, bool) or not isinstance(n_regions, numbers.Integral):
+            raise ValueError(f"`n_regions` must be an integer, got {n_regions!r}")
+        if n_regions < 1:
+            raise ValueError(f"`n_regions` must be at least 1, got {n_regions}")
+        n_regions = int(n_regions)
+    if min_persistence is not None:
+        try:
+            value = float(min_persistence)
+        except (TypeError, ValueError):
+            raise ValueError(f"`min_persistence` must be a number, got {min_persistence!r}") from None
+        if not value >= 0:  # NaN too
+            raise ValueError(f"`min_persistence` must be a non-negative number, got {min_persistence!r}")
+        min_persistence = value
+    return min_persistence, n_regions
 
 
 def grid_offsets(ndim: int, connectivity="kuhn") -> NDArray[np.intp]:
@@ -66,17 +93,34 @@ def grid_offsets(ndim: int, connectivity="kuhn") -> NDArray[np.intp]:
 
 
 def _csr_adjacency(adjacency, n_vertices):
-    """Symmetric CSR (indptr, indices) without self-loops from sparse, (E, 2) or networkx."""
+    """Symmetric CSR (indptr, indices) without self-loops from sparse, (E, 2) or networkx.
+
+    Adjacency is structure, not weight: every stored nonzero of a sparse matrix is an
+    edge, whatever its value or sign (duplicates that would sum to zero included).
+    """
     from scipy import sparse
 
     if hasattr(adjacency, "nodes") and hasattr(adjacency, "edges"):  # networkx graph
         import networkx as nx
 
-        matrix = nx.to_scipy_sparse_array(adjacency, nodelist=list(adjacency.nodes), weight=None)
-    elif sparse.issparse(adjacency):
-        matrix = adjacency
+        adjacency = nx.to_scipy_sparse_array(adjacency, nodelist=list(adjacency.nodes),
+                                             weight=None)
+    if sparse.issparse(adjacency):
+        if adjacency.shape != (n_vertices, n_vertices):
+            raise ValueError(
+                f"`adjacency` is {adjacency.shape[0]} x {adjacency.shape[1]} but the field has "
+                f"{n_vertices} vertices"
+            )
+        coo = sparse.coo_array(adjacency)  # keeps duplicates and explicit entries as stored
+        stored = coo.data != 0
+        rows, cols = coo.row[stored], coo.col[stored]
     else:
         edges = np.asarray(adjacency)
+        if edges.ndim == 2 and edges.shape[0] == edges.shape[1] == n_vertices:
+            raise ValueError(
+                f"`adjacency` is a dense {n_vertices} x {n_vertices} array: pass an adjacency "
+                "matrix as scipy.sparse.csr_array(matrix), or edges as an (E, 2) array"
+            )
         if edges.ndim != 2 or edges.shape[1] != 2:
             raise ValueError(
                 f"`adjacency` must be a sparse matrix, an (E, 2) edge array or a networkx "
@@ -89,20 +133,15 @@ def _csr_adjacency(adjacency, n_vertices):
                 f"`adjacency` refers to vertices outside the field (indices must be in "
                 f"[0, {n_vertices - 1}], got [{edges.min()}, {edges.max()}])"
             )
-        matrix = sparse.coo_matrix(
-            (np.ones(len(edges), dtype=np.int8), (edges[:, 0], edges[:, 1])),
-            shape=(n_vertices, n_vertices),
-        )
-    if matrix.shape != (n_vertices, n_vertices):
-        raise ValueError(
-            f"`adjacency` is {matrix.shape[0]} x {matrix.shape[1]} but the field has "
-            f"{n_vertices} vertices"
-        )
-    matrix = sparse.csr_matrix(matrix, dtype=np.int8)
-    matrix = (matrix + matrix.T).tocsr()
-    matrix.setdiag(0)
-    matrix.eliminate_zeros()
-    return matrix.indptr.astype(np.int64), matrix.indices.astype(np.int64)
+        rows, cols = edges[:, 0], edges[:, 1]
+    rows = rows.astype(np.int64, copy=False)
+    cols = cols.astype(np.int64, copy=False)
+    keep = rows != cols
+    key = np.unique(np.concatenate([rows[keep] * n_vertices + cols[keep],
+                                    cols[keep] * n_vertices + rows[keep]]))
+    indptr = np.zeros(n_vertices + 1, dtype=np.int64)
+    np.cumsum(np.bincount(key // n_vertices, minlength=n_vertices), out=indptr[1:])
+    return indptr, key % n_vertices
 
 
 def _cross_edges(kernels, flat, real, grid, offsets, indptr, indices, cell):
@@ -331,6 +370,7 @@ class MorseHierarchy:
         The midpoint between the persistences of the last kept and the first merged
         event; `segment(n_regions=k)` is exact even where ties make no threshold so.
         """
+        _, n_regions = check_cut(n_regions=n_regions)
         p = np.sort(self.event_persistence)[::-1]
         keep = n_regions - self.n_components
         if keep <= 0:
@@ -341,10 +381,8 @@ class MorseHierarchy:
 
     def _merged_events(self, min_persistence, n_regions):
         p = self.event_persistence
+        min_persistence, n_regions = check_cut(min_persistence, n_regions)
         if n_regions is not None:
-            n_regions = int(n_regions)
-            if n_regions < 1:
-                raise ValueError(f"`n_regions` must be at least 1, got {n_regions}")
             if n_regions > len(self.maxima):
                 warnings.warn(
                     f"asked for {n_regions} regions but the field has only "
@@ -359,18 +397,13 @@ class MorseHierarchy:
             merged = np.ones(len(p), dtype=bool)
             merged[rank[:keep]] = False
             return merged
-        t = 0.0 if min_persistence is None else float(min_persistence)
-        if not np.isfinite(t) and t != np.inf:
-            raise ValueError(f"`min_persistence` must be a number, got {min_persistence}")
-        return p < t
+        return p < (0.0 if min_persistence is None else min_persistence)
 
     def region_of_maximum(self, min_persistence=None, n_regions=None) -> NDArray[np.int32]:
         """(M,) region label of each maximum for a cut (see `segment`)."""
         from scipy.sparse import coo_matrix
         from scipy.sparse.csgraph import connected_components
 
-        if min_persistence is not None and n_regions is not None:
-            raise ValueError("give `min_persistence` or `n_regions`, not both")
         merged = self._merged_events(min_persistence, n_regions)
         m = len(self.maxima)
         graph = coo_matrix((np.ones(int(merged.sum())), (self.young[merged], self.target[merged])),
@@ -416,6 +449,11 @@ class MorseHierarchy:
         if labels is None:
             labels = self.segment(**cut)
         labels = np.asarray(labels)
+        if labels.shape != tuple(self.shape):
+            raise ValueError(f"`labels` must have the field's shape {tuple(self.shape)}, "
+                             f"got {labels.shape}")
+        if labels.dtype.kind not in "biu" or (labels.size and labels.min() < 0):
+            raise ValueError("`labels` must hold non-negative integer labels")
         f = self._field
         pairs, saddles = [], []
         if self._adjacency is None:

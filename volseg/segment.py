@@ -9,7 +9,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .curvature import default_value_scale, grid_curvature, normalize_operator
-from .morse import MorseHierarchy, descending_complex
+from . import _validate
+from .morse import MorseHierarchy, check_cut, descending_complex
 
 __all__ = ["Segmentation", "segment_volume", "DEFAULT_REGIONS"]
 
@@ -56,6 +57,17 @@ class Segmentation:
         first[:] = self.hierarchy.maxima[seen]
         return first
 
+    def region_table(self) -> list[dict]:
+        """One entry per region: ``label``, ``size`` (voxels), ``maximum`` ([x, y, z] of
+        its highest curvature maximum) and ``curvature_at_maximum``."""
+        sizes = np.bincount(self.labels.ravel(), minlength=self.n_regions)
+        table = []
+        for region, top in enumerate(self.region_maxima()):
+            where = tuple(int(c) for c in np.unravel_index(top, self.labels.shape))
+            table.append({"label": region, "size": int(sizes[region]), "maximum": list(where),
+                          "curvature_at_maximum": float(self.curvature[where])})
+        return table
+
 
 def segment_volume(
     volume,
@@ -92,14 +104,11 @@ def segment_volume(
     Segmentation
     """
     operator = normalize_operator(operator)
-    if min_persistence is not None and n_regions is not None:
-        raise ValueError("give `min_persistence` or `n_regions`, not both")
+    min_persistence, n_regions = check_cut(min_persistence, n_regions)
     if min_persistence is None and n_regions is None:
         n_regions = DEFAULT_REGIONS
-    if spacing is None:
-        spacing = getattr(volume, "spacing", (1.0, 1.0, 1.0))
-    spacing = tuple(float(s) for s in np.broadcast_to(np.asarray(spacing, float), (3,)))
-    data = np.asarray(volume)
+    spacing = _validate.spacing(spacing, getattr(volume, "spacing", (1.0, 1.0, 1.0)))
+    data = _validate.volume_array(volume)
     if value_scale is None:
         value_scale = default_value_scale(data, spacing)
     timings = {}

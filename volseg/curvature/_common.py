@@ -44,6 +44,17 @@ def check_nondegenerate(edges, simplices, volumes) -> None:
         )
 
 
+def require_manifold(simplices, faces: _mesh.Faces, n_vertices: int) -> None:
+    """Refuse pinched vertices (a star in two or more pieces)."""
+    pinched = _mesh.pinched_vertices(simplices, n_vertices, faces)
+    if len(pinched):
+        raise ValueError(
+            f"{len(pinched)} vertices are pinched (their star is in several pieces, e.g. two "
+            f"surfaces touching at a point; first: vertex {int(pinched[0])}): the mesh is not "
+            "a manifold there and curvature is undefined"
+        )
+
+
 def require_consistent(faces: _mesh.Faces) -> None:
     if not faces.consistent.all():
         bad = int(np.flatnonzero(~faces.consistent)[0])

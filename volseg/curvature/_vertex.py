@@ -8,7 +8,12 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .. import mesh as _mesh
-from ._common import check_nondegenerate, normalize_operator, require_consistent
+from ._common import (
+    check_nondegenerate,
+    normalize_operator,
+    require_consistent,
+    require_manifold,
+)
 from ._extrinsic import extrinsic_distortion
 from ._intrinsic import intrinsic_distortion
 from ._laplace import laplace_beltrami
@@ -51,8 +56,8 @@ def vertex_curvature(
     Raises
     ------
     ValueError
-        Wrong shapes, indices out of range, a face shared by three or more
-        simplices, zero-volume simplices, inconsistent orientation (for the oriented
+        Wrong shapes, indices out of range, an empty mesh, a face shared by three
+        or more simplices, a pinched vertex (its star in several pieces), zero-volume simplices, inconsistent orientation (for the oriented
         operators), or an operator undefined for this n.
 
     Examples
@@ -72,6 +77,7 @@ def vertex_curvature(
     if operator == "intrinsic" and n not in (2, 3):
         raise ValueError(f"the 'intrinsic' operator is defined for n = 2 and n = 3, got n = {n}")
     faces = _mesh.faces(simplices, len(vertices))
+    require_manifold(simplices, faces, len(vertices))
     edges = _mesh._edge_vectors(vertices, simplices)
     raw = _mesh._cofactor_normals(edges)
     volumes = np.linalg.norm(raw, axis=1) / math.factorial(n)

@@ -1,0 +1,16 @@
+"""Volumes in and out: readers that refuse bad files clearly, writers that keep the
+input's frame, and the all-or-nothing writer of a result's output files.
+
+- `read_volume` -> `Volume` (array [x, y, z] + `Frame`); `VolumeFileError` for
+  every malformed input;
+- `write_volume` (NIfTI, NRRD, .npy, raw), atomically;
+- `OutputSet`: lock, check, stage and commit the files of one result.
+"""
+
+from .output_set import OutputError, OutputSet, recover
+from .readers import DTYPES, read_volume
+from .volume import Frame, Volume, VolumeFileError
+from .writers import atomic_path, write_volume
+
+__all__ = ["Volume", "Frame", "VolumeFileError", "read_volume", "write_volume", "atomic_path",
+           "OutputSet", "OutputError", "recover", "DTYPES"]

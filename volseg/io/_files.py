@@ -1,0 +1,158 @@
+"""Bounded access to input files: only regular files, only what a header names, never
+more bytes than declared.
+
+Every reader goes through these, so a hostile or careless file (a device, a pipe,
+a header declaring terabytes, a gzip stream that does not end, a data file named
+by an absolute path) is refused before anything large is allocated.
+"""
+
+from __future__ import annotations
+
+import os
+import stat
+import zlib
+from pathlib import Path
+
+import numpy as np
+
+from .volume import VolumeFileError
+
+#: Largest header read before its end marker must have appeared (NRRD, .dat text).
+MAX_HEADER_BYTES = 1 << 20
+_PIECE = 1 << 20
+
+_KINDS = {stat.S_IFCHR: "a character device", stat.S_IFBLK: "a block device",
+          stat.S_IFIFO: "a named pipe", stat.S_IFSOCK: "a socket", stat.S_IFDIR: "a folder"}
+
+
+def regular_file_size(path: Path) -> int:
+    """Size of `path` in bytes; refuses anything that is not a regular file.
+
+    Uses ``stat`` only, so a FIFO is refused without being opened (opening one
+    blocks until a writer appears).
+    """
+    try:
+        info = os.stat(path)
+    except FileNotFoundError:
+        raise FileNotFoundError(f"{path}: no such file") from None
+    except OSError as err:  # ENAMETOOLONG, ELOOP, EACCES on a parent ...
+        raise VolumeFileError(f"{path}: cannot be read ({err.strerror})") from None
+    kind = stat.S_IFMT(info.st_mode)
+    if kind != stat.S_IFREG:
+        raise VolumeFileError(f"{path}: is {_KINDS.get(kind, 'not a regular file')}, not a volume file")
+    return info.st_size
+
+
+def read_head(path: Path, end_marker: bytes, limit: int = MAX_HEADER_BYTES) -> tuple[bytes, int]:
+    """(header bytes, offset of the data) for a header that ends at `end_marker`.
+
+    Reads at most `limit` bytes; a header that has not ended by then is refused.
+    Returns (all bytes read, -1) when the file ends before the marker.
+    """
+    with open(path, "rb") as handle:
+        head = handle.read(limit + len(end_marker))
+    end = head.find(end_marker)
+    if end < 0:
+        if len(head) > limit:
+            raise VolumeFileError(f"{path}: no end of header within the first {limit} bytes")
+        return head, -1
+    return head[:end], end + len(end_marker)
+
+
+def confined(header: Path, name: str, field: str, allow_external: bool) -> Path:
+    """The data file a detached header names, which must lie in its folder or below.
+
+    Raises
+    ------
+    VolumeFileError
+        The name is empty, absolute or climbs out of the header's folder (``..``,
+        a symbolic link), unless `allow_external` is true.
+    """
+    name = name.strip()
+    if not name:
+        raise VolumeFileError(f"{header}: the {field!r} field is empty")
+    if "\0" in name:
+        raise VolumeFileError(f"{header}: the {field!r} field holds a NUL byte")
+    target = header.parent / name
+    if allow_external:
+        return target
+    base = header.parent.resolve()
+    try:
+        inside = target.resolve().is_relative_to(base)
+    except (OSError, RuntimeError) as err:  # too long, a symlink loop
+        raise VolumeFileError(f"{header}: its {field!r} {name!r} cannot be resolved ({err})") from None
+    if not inside:
+        raise VolumeFileError(
+            f"{header}: its {field!r} {name!r} lies outside the header's folder {base}; "
+            "pass allow_external_data=True (--allow-external-data) to read it anyway"
+        )
+    return target
+
+
+def expected_bytes(path, shape, dtype: np.dtype) -> int:
+    """Bytes of an array of `shape` and `dtype`, refusing sizes that are not sizes."""
+    count = 1
+    for size in shape:
+        if size < 1:
+            raise VolumeFileError(f"{path}: sizes must be positive, got {tuple(shape)}")
+        count *= int(size)
+    return count * dtype.itemsize
+
+
+def read_exact(path: Path, offset: int, shape, dtype: np.dtype) -> np.ndarray:
+    """The flat array of `shape` x `dtype` stored at `offset`, checked against the file size
+    before anything is allocated (file order, no reshape)."""
+    expected = expected_bytes(path, shape, dtype)
+    size = regular_file_size(path)
+    if offset < 0 or size - offset != expected:
+        raise VolumeFileError(
+            f"{path}: expected {expected} bytes for shape {tuple(shape)} of {dtype.name} "
+            f"(+{offset} header bytes), found {size - offset}"
+        )
+    with open(path, "rb") as handle:
+        handle.seek(offset)
+        flat = np.fromfile(handle, dtype=dtype, count=expected // dtype.itemsize)
+    if flat.size * dtype.itemsize != expected:  # the file shrank while we read it
+        raise VolumeFileError(f"{path}: ended after {flat.size * dtype.itemsize} of {expected} bytes")
+    return flat
+
+
+def gunzip_bounded(path: Path, offset: int, expected: int, *, exact: bool = True) -> bytes:
+    """Decompress the gzip (or zlib) stream at `offset`, in pieces, stopping as soon as
+    it yields more than `expected` bytes; a shorter stream is refused, and so is a
+    longer one when `exact` (else only the first `expected` bytes are kept).
+
+    Concatenated gzip members are read as one stream, as gzip does.
+    """
+    out = bytearray()
+    decoder = zlib.decompressobj(wbits=47)  # gzip or zlib header, detected
+    try:
+        with open(path, "rb") as handle:
+            handle.seek(offset)
+            pending = b""
+            while True:
+                if not pending:
+                    pending = handle.read(_PIECE)
+                    if not pending:
+                        break
+                out += decoder.decompress(pending, expected + 1 - len(out))
+                pending = decoder.unconsumed_tail
+                if len(out) > expected:
+                    if not exact:
+                        return bytes(out[:expected])
+                    raise VolumeFileError(
+                        f"{path}: the compressed data hold more than the {expected} bytes "
+                        "the header declares")
+                if decoder.eof:  # another gzip member may follow; anything else ends it
+                    pending = decoder.unused_data + pending
+                    if len(pending) < 2:
+                        pending += handle.read(2)
+                    if not pending.startswith(b"\x1f\x8b"):
+                        break
+                    decoder = zlib.decompressobj(wbits=47)
+    except zlib.error as err:
+        raise VolumeFileError(f"{path}: corrupt compressed data ({err})") from None
+    if len(out) != expected:
+        raise VolumeFileError(
+            f"{path}: expected {expected} bytes after decompression, found {len(out)}")
+    return bytes(out)

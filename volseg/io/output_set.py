@@ -1,0 +1,207 @@
+"""Writing the files of one result (labels, curvature, summary, preview) as one set.
+
+Guarantees, for a folder and a stem (``fuel`` -> ``fuel_labels.nii.gz``, ...):
+
+- **one writer at a time**: an advisory lock (``flock``) on ``.<stem>.volseg-lock``
+  in the folder, taken before anything is computed; a second process fails at once
+  (or waits, with ``wait=True``). The lock file is removed on release;
+- **checked up front**: existing outputs are refused unless ``force``, and a target
+  that is not a regular file (a folder, a link to a device) is refused even with it;
+- **all or nothing**: every file is written into a hidden staging folder; a
+  ``COMMIT`` journal is written atomically; then old files are moved aside and new
+  ones moved into place. A failure during that rolls back to the complete old set;
+  a process killed during it (a window of a few renames) leaves the journal, and
+  the next writer of that stem rolls the new set forward. A staging folder without
+  a journal (killed while computing or writing) is simply removed by the next one.
+"""
+
+from __future__ import annotations
+
+import errno
+import fcntl
+import json
+import os
+import shutil
+import stat
+import tempfile
+from pathlib import Path
+
+__all__ = ["OutputSet", "OutputError", "recover"]
+
+_STAGING = ".volseg-staging-"
+_JOURNAL = "COMMIT"
+
+
+class OutputError(ValueError):
+    """The outputs cannot be written as asked (exist, locked, not a file)."""
+
+
+def _staging_prefix(stem: str) -> str:
+    return f"{_STAGING}{stem}-"
+
+
+def recover(folder, stem: str) -> list[str]:
+    """Finish or discard what killed writers of `stem` left in `folder`.
+
+    Call it only while holding the stem's lock (`OutputSet` does). A staging folder
+    with a journal is rolled forward (its new files moved into place); one without
+    is removed. Returns what was done, one line per staging folder.
+    """
+    folder = Path(folder)
+    done = []
+    prefix = _staging_prefix(stem)
+    for staging in sorted(p for p in folder.iterdir() if p.name.startswith(prefix)):
+        journal = staging / _JOURNAL
+        if journal.exists():
+            names = json.loads(journal.read_text())
+            for name in names:
+                new = staging / "new" / name
+                if new.exists():
+                    os.replace(new, folder / name)
+            done.append(f"{staging.name}: completed an interrupted commit of {len(names)} files")
+        else:
+            done.append(f"{staging.name}: removed the staging of an interrupted run")
+        shutil.rmtree(staging, ignore_errors=True)
+    return done
+
+
+class OutputSet:
+    """The output files of one stem in one folder, locked, checked and written as one.
+
+    Parameters
+    ----------
+    folder : str or Path
+        Must exist.
+    stem : str
+        The common name part; the lock and staging folders are per stem.
+    names : dict of str -> str
+        Kind -> file name (``{"labels": "fuel_labels.nii.gz", ...}``).
+    force : bool
+        Replace an existing set.
+    wait : bool
+        Wait for another writer of the same stem instead of failing at once.
+
+    Examples
+    --------
+    >>> with OutputSet(folder, "fuel", {"summary": "fuel_summary.json"}) as out:  # doctest: +SKIP
+    ...     out.commit(lambda paths: paths["summary"].write_text("{}"))
+    """
+
+    def __init__(self, folder, stem: str, names: dict, *, force: bool = False, wait: bool = False):
+        self.folder = Path(folder)
+        self.stem = stem
+        self.targets = {kind: self.folder / name for kind, name in names.items()}
+        self.force = force
+        self.wait = wait
+        self.recovered: list[str] = []
+        self._lock_path = self.folder / f".{stem}.volseg-lock"
+        self._fd = None
+
+    # ------------------------------------------------------------ lock
+
+    def __enter__(self) -> OutputSet:
+        self.acquire()
+        return self
+
+    def __exit__(self, *exc):
+        self.release()
+
+    def acquire(self):
+        """Take the lock, finish or remove stale staging, check the targets."""
+        while self._fd is None:
+            try:
+                fd = os.open(self._lock_path, os.O_RDWR | os.O_CREAT, 0o644)
+            except OSError as err:
+                raise OutputError(f"{self.folder}: cannot create a lock file there "
+                                  f"({err.strerror})") from None
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | (0 if self.wait else fcntl.LOCK_NB))
+            except OSError as err:
+                os.close(fd)
+                if err.errno not in (errno.EWOULDBLOCK, errno.EAGAIN):
+                    raise
+                raise OutputError(
+                    f"{self.folder}: another volseg process is writing {self.stem}_* there; "
+                    "wait for it to finish, or use --wait") from None
+            try:
+                same = os.path.samestat(os.fstat(fd), os.stat(self._lock_path))
+            except FileNotFoundError:
+                same = False
+            if same:  # else the holder removed the file as we opened it: take the new one
+                self._fd = fd
+                os.ftruncate(fd, 0)
+                os.write(fd, f"{os.getpid()}\n".encode())
+            else:
+                os.close(fd)
+        try:
+            self.recovered = recover(self.folder, self.stem)
+            self.check()
+        except BaseException:
+            self.release()
+            raise
+
+    def release(self):
+        if self._fd is not None:
+            self._lock_path.unlink(missing_ok=True)
+            os.close(self._fd)
+            self._fd = None
+
+    def check(self):
+        """Refuse targets that exist (without `force`) or are not regular files."""
+        existing = []
+        for path in self.targets.values():
+            try:
+                mode = os.lstat(path).st_mode
+            except FileNotFoundError:
+                continue
+            if not stat.S_ISREG(mode):
+                raise OutputError(f"{path}: exists and is not a regular file; "
+                                  "move it away (volseg replaces only files it wrote)")
+            existing.append(path)
+        if existing and not self.force:
+            raise OutputError(f"{existing[0]} exists (and {len(existing) - 1} more outputs); "
+                              "use --force to overwrite")
+
+    # ------------------------------------------------------------ commit
+
+    def commit(self, write) -> dict:
+        """Write the set: ``write(paths)`` fills ``paths[kind]`` (staging files), then
+        they replace the targets together. Returns kind -> final path."""
+        if self._fd is None:
+            raise RuntimeError("OutputSet.commit needs the lock: use it in a `with` block")
+        staging = Path(tempfile.mkdtemp(prefix=_staging_prefix(self.stem), dir=self.folder))
+        try:
+            (staging / "new").mkdir()
+            (staging / "old").mkdir()
+            paths = {kind: staging / "new" / t.name for kind, t in self.targets.items()}
+            write(paths)
+            missing = [str(p.name) for p in paths.values() if not p.is_file()]
+            if missing:
+                raise RuntimeError(f"the writer did not write {', '.join(missing)}")
+            self.check()  # nothing appeared meanwhile (the lock keeps volseg out, not others)
+            journal = staging / f".{_JOURNAL}.part"
+            journal.write_text(json.dumps([t.name for t in self.targets.values()]))
+            os.replace(journal, staging / _JOURNAL)
+            self._swap(staging)
+        finally:
+            shutil.rmtree(staging, ignore_errors=True)
+        return dict(self.targets)
+
+    def _swap(self, staging: Path):
+        moved_aside, placed = [], []
+        try:
+            for target in self.targets.values():
+                if target.exists():
+                    os.replace(target, staging / "old" / target.name)
+                    moved_aside.append(target)
+            for target in self.targets.values():
+                os.replace(staging / "new" / target.name, target)
+                placed.append(target)
+        except BaseException:
+            for target in placed:
+                os.replace(target, staging / "new" / target.name)
+            for target in moved_aside:
+                os.replace(staging / "old" / target.name, target)
+            (staging / _JOURNAL).unlink(missing_ok=True)
+            raise
+

@@ -1,0 +1,134 @@
+"""The `Volume` (an array indexed [x, y, z] with its voxel-to-world frame) and the
+error every reader raises for a malformed file."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = ["Volume", "Frame", "VolumeFileError"]
+
+
+class VolumeFileError(ValueError):
+    """A volume file that cannot be read as it is: it names the file and the field.
+
+    Raised by every reader for every malformed input (truncated data, a header field
+    that does not parse, a declared size the file cannot hold, a data file outside
+    the header's folder, a device or a pipe where a file should be). A subclass of
+    ValueError, so ``except ValueError`` keeps working.
+    """
+
+
+#: NIfTI xform codes: 0 unknown, 1 scanner, 2 aligned, 3 Talairach, 4 MNI, 5 template.
+_CODES = range(0, 6)
+
+
+@dataclass(frozen=True, eq=False)
+class Frame:
+    """Voxel-to-world geometry: voxel (i, j, k) sits at ``affine @ (i, j, k, 1)``.
+
+    World coordinates are NIfTI's RAS+ (x to the right, y anterior, z superior);
+    NRRD's left-posterior-superior directions are converted on reading.
+
+    Attributes
+    ----------
+    affine : (4, 4) ndarray of float
+        The voxel-to-world affine (NIfTI's sform where it is coded, else its qform).
+    sform_code, qform_code : int
+        NIfTI's codes (0 unknown, 1 scanner, 2 aligned, ...), kept from a NIfTI
+        input and written back unchanged.
+    qform : (4, 4) ndarray or None
+        NIfTI's qform where it differs from `affine`; None means the same.
+    """
+
+    affine: NDArray[np.float64]
+    sform_code: int = 2
+    qform_code: int = 0
+    qform: NDArray[np.float64] | None = None
+
+    def __post_init__(self):
+        affine = np.array(self.affine, dtype=np.float64)
+        if affine.shape != (4, 4) or not np.isfinite(affine).all():
+            raise ValueError(f"`affine` must be a finite 4 x 4 matrix, got {affine.shape}")
+        if abs(np.linalg.det(affine[:3, :3])) < 1e-12 * max(1.0, np.abs(affine[:3, :3]).max()) ** 3:
+            raise ValueError("`affine` is singular: its voxel axes do not span 3-D space")
+        object.__setattr__(self, "affine", affine)
+        for name in ("sform_code", "qform_code"):
+            if int(getattr(self, name)) not in _CODES:
+                raise ValueError(f"`{name}` must be a NIfTI xform code 0..5, got {getattr(self, name)}")
+            object.__setattr__(self, name, int(getattr(self, name)))
+
+    @classmethod
+    def from_spacing(cls, spacing) -> Frame:
+        """The axis-aligned frame of a format that stores only voxel sizes."""
+        return cls(np.diag([*(float(s) for s in spacing), 1.0]))
+
+    @property
+    def spacing(self) -> tuple:
+        """Voxel sizes: the lengths of the affine's three voxel axes."""
+        return tuple(float(s) for s in np.linalg.norm(self.affine[:3, :3], axis=0))
+
+
+class Volume:
+    """A 3-D scalar field on a regular grid.
+
+    Parameters and attributes
+    -------------------------
+    data : (X, Y, Z) ndarray
+        Indexed [x, y, z].
+    spacing : (3,) sequence of float, optional
+        Voxel sizes, for an axis-aligned frame; give this or `frame`.
+    frame : Frame, optional
+        Voxel-to-world geometry; every volume written from this one (labels,
+        curvature) carries it. Curvature uses only the voxel sizes (`spacing`, the
+        lengths of the affine's columns): a rotated, flipped or translated scan has
+        the same graph in R^4.
+    name : str
+        Short name for outputs (the file name without size and type).
+    source : str
+        How it was read (format, byte order, header), for `volseg info`.
+    path : Path or None
+        The file named by the user.
+    files : tuple of Path
+        Every file whose bytes were read (a detached header and its data file), in
+        reading order; the input checksum covers them all.
+    """
+
+    def __init__(self, data, spacing=None, *, frame: Frame | None = None, name: str = "volume",
+                 source: str = "", path: Path | None = None, files: tuple = ()):
+        if frame is None:
+            frame = Frame.from_spacing((1.0, 1.0, 1.0) if spacing is None else spacing)
+        elif spacing is not None and not np.allclose(frame.spacing, spacing):
+            raise ValueError(f"`spacing` {tuple(spacing)} disagrees with the frame's {frame.spacing}")
+        self.data = data
+        self.frame = frame
+        self.name = name
+        self.source = source
+        self.path = path
+        self.files = tuple(files)
+
+    def __repr__(self):
+        return (f"Volume(name={self.name!r}, shape={self.shape}, dtype={self.dtype}, "
+                f"spacing={self.spacing})")
+
+    @property
+    def spacing(self) -> tuple:
+        return self.frame.spacing
+
+    @property
+    def affine(self) -> NDArray[np.float64]:
+        return self.frame.affine
+
+    @property
+    def shape(self) -> tuple:
+        return self.data.shape
+
+    @property
+    def dtype(self):
+        return self.data.dtype
+
+    def __array__(self, dtype=None, copy=None):
+        return np.asarray(self.data, dtype=dtype)

@@ -1,0 +1,103 @@
+"""`write_volume`: labels and curvature to NIfTI, NRRD, .npy or raw, atomically, with
+the input's voxel-to-world frame."""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from .readers import NRRD_TYPES
+from .volume import Frame
+
+__all__ = ["write_volume", "atomic_path"]
+
+_NRRD_NAMES = {code: name for name, code in NRRD_TYPES.items() if "_" not in name and " " not in name}
+
+
+def atomic_path(path: Path) -> Path:
+    """A temporary file beside `path` (same folder, so renaming it is atomic)."""
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)
+    os.close(fd)
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; outputs should read like any file
+    return Path(tmp)
+
+
+def _nifti(path: Path, data, frame: Frame, compressed: bool):
+    import nibabel
+
+    image = nibabel.Nifti1Image(data, frame.affine)
+    image.header.set_sform(frame.affine, frame.sform_code)
+    image.header.set_qform(frame.affine if frame.qform is None else frame.qform, frame.qform_code)
+    image.header.set_xyzt_units("mm")
+    # nibabel picks gzip from the name: write under a .nii(.gz) name, then move.
+    named = path.with_name(path.name + (".nii.gz" if compressed else ".nii"))
+    try:
+        nibabel.save(image, named)
+        os.replace(named, path)
+    finally:
+        named.unlink(missing_ok=True)
+
+
+def _nrrd(path: Path, data, frame: Frame):
+    code = data.dtype.str[1:]
+    if code not in _NRRD_NAMES:
+        raise ValueError(f"{path}: NRRD cannot hold {data.dtype}")
+    columns = frame.affine[:3, :3].T
+    directions = " ".join("(" + ",".join(f"{v:.17g}" for v in c) + ")" for c in columns)
+    origin = "(" + ",".join(f"{v:.17g}" for v in frame.affine[:3, 3]) + ")"
+    header = (
+        f"NRRD0005\ntype: {_NRRD_NAMES[code]}\ndimension: 3\n"
+        f"space: right-anterior-superior\nsizes: {' '.join(map(str, data.shape))}\n"
+        f"space directions: {directions}\nspace origin: {origin}\n"
+        f"endian: little\nencoding: raw\n\n"
+    )
+    with open(path, "wb") as handle:
+        handle.write(header.encode())
+        handle.write(np.ascontiguousarray(data.transpose(2, 1, 0)).astype(
+            data.dtype.newbyteorder("<")).tobytes())
+
+
+def write_volume(path, data, *, spacing=(1.0, 1.0, 1.0), frame: Frame | None = None) -> Path:
+    """Write a label or curvature volume, atomically (temporary file, then rename).
+
+    Parameters
+    ----------
+    path : str or Path
+        The format follows the extension: ``.nii.gz`` / ``.nii`` (NIfTI),
+        ``.nrrd`` (with space directions and origin, RAS+), ``.npy``, ``.raw``
+        (x fastest, native little-endian, no header).
+    data : (X, Y, Z) array_like
+    spacing : (3,) sequence of float
+        Voxel sizes, for an axis-aligned frame when `frame` is not given.
+    frame : Frame, optional
+        The voxel-to-world frame, normally the input's (``volume.frame``): NIfTI
+        outputs get its affine, qform and codes unchanged.
+    """
+    path = Path(path)
+    data = np.asarray(data)
+    frame = frame or Frame.from_spacing(spacing)
+    name = path.name.lower()
+    if not name.endswith((".nii", ".nii.gz", ".npy", ".nrrd", ".raw")):
+        raise ValueError(f"{path}: unknown output format; use .nii.gz, .nii, .npy, .nrrd or .raw")
+    tmp = atomic_path(path)
+    try:
+        if name.endswith((".nii", ".nii.gz")):
+            _nifti(tmp, data, frame, compressed=name.endswith(".gz"))
+        elif name.endswith(".npy"):
+            with open(tmp, "wb") as handle:
+                np.save(handle, data)
+        elif name.endswith(".nrrd"):
+            _nrrd(tmp, data, frame)
+        else:
+            with open(tmp, "wb") as handle:
+                handle.write(np.ascontiguousarray(data.transpose(2, 1, 0)).tobytes())
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return path

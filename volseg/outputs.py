@@ -1,0 +1,103 @@
+"""The files of one segmentation: their names, the summary, and writing them as one set.
+
+``<stem>_labels.nii.gz`` and ``<stem>_curvature.nii.gz`` carry the input's
+voxel-to-world frame (affine and NIfTI codes); ``<stem>_summary.json`` is strict
+JSON (non-finite numbers are null); ``<stem>_preview.png`` shows mid slices.
+They are written through `volseg.io.OutputSet`: locked, checked up front, all or
+nothing.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+from . import _json
+from ._version import __version__
+from .io import Frame, OutputSet, write_volume
+
+__all__ = ["OUTPUT_SUFFIXES", "output_names", "files_sha256", "summary", "write_segmentation"]
+
+OUTPUT_SUFFIXES = {"labels": "_labels.nii.gz", "curvature": "_curvature.nii.gz",
+                   "summary": "_summary.json", "preview": "_preview.png"}
+
+
+def output_names(stem: str) -> dict:
+    """Kind -> file name of the outputs of `stem`."""
+    return {kind: stem + suffix for kind, suffix in OUTPUT_SUFFIXES.items()}
+
+
+def files_sha256(paths) -> str | None:
+    """SHA-256 of the bytes of `paths` read one after another (a detached header and its
+    data file: every byte the reader used). None for no files."""
+    paths = list(paths)
+    if not paths:
+        return None
+    digest = hashlib.sha256()
+    for path in paths:
+        with open(path, "rb") as handle:
+            for block in iter(lambda h=handle: h.read(1 << 20), b""):
+                digest.update(block)
+    return digest.hexdigest()
+
+
+def summary(result, *, name, source=None, checksum=None, files=(), frame: Frame | None = None,
+            noise=None, seed=None, requested_regions=None) -> dict:
+    """The summary dictionary of a `Segmentation` (strict-JSON ready)."""
+    regions = result.region_table()
+    out = {
+        "volseg_version": __version__,
+        "input": str(source) if source else name,
+        "input_files": [str(f) for f in files],
+        "input_sha256": checksum,
+        "shape": list(result.labels.shape),
+        "spacing": list(result.spacing),
+        "affine": (frame.affine if frame is not None else np.diag([*result.spacing, 1.0])).tolist(),
+        "operator": result.operator,
+        "value_scale": result.value_scale,
+        "noise_percent": noise or 0.0,
+        "seed": seed if noise else None,
+        "n_regions": result.n_regions,
+        "requested_regions": requested_regions,
+        "min_persistence": result.min_persistence,
+        "n_maxima": int(len(result.hierarchy.maxima)),
+        "regions": regions,
+        "timings_s": {k: round(v, 4) for k, v in result.timings.items()},
+    }
+    return out
+
+
+def write_segmentation(outputs: OutputSet, result, values, info: dict, *, frame: Frame | None,
+                       title: str) -> dict:
+    """Write labels, curvature, summary and preview of `result` as one set.
+
+    `values` is the volume that was segmented (for the preview), `info` the summary
+    (its ``outputs`` entry is filled in here). Returns the summary.
+    """
+    from .preview import write_preview
+
+    frame = frame or Frame.from_spacing(result.spacing)
+    info = {**info, "outputs": {kind: str(path) for kind, path in outputs.targets.items()}}
+    label_type = np.min_scalar_type(max(int(result.labels.max()), 0))
+
+    def write(paths):
+        # Labels in the smallest unsigned type that holds them (what label viewers
+        # expect); the three writers run at once (zlib releases the GIL).
+        with ThreadPoolExecutor(3) as pool:
+            jobs = [
+                pool.submit(write_volume, paths["labels"], result.labels.astype(label_type),
+                            frame=frame),
+                pool.submit(write_volume, paths["curvature"],
+                            result.curvature.astype(np.float32), frame=frame),
+                pool.submit(write_preview, paths["preview"], values, result.curvature,
+                            result.labels, title=title),
+            ]
+            for job in jobs:
+                job.result()
+        Path(paths["summary"]).write_text(_json.dumps(info, indent=2))
+
+    outputs.commit(write)
+    return info
