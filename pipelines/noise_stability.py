@@ -93,6 +93,30 @@ def clean_reference(volume, operator, regions, threads=1):
             "value_range": float(data.max()) - float(data.min())}
 
 
+def _failure(err) -> dict:
+    return {"error": f"{type(err).__name__}: {' '.join(str(err).split())}"}
+
+
+def clean_reference_safely(volume, operator, regions, threads=1):
+    """`clean_reference`, with a failure returned as ``{"error": ...}`` (see below)."""
+    try:
+        return clean_reference(volume, operator, regions, threads)
+    except Exception as err:  # noqa: BLE001 - reported in the rows of its tasks
+        return _failure(err)
+
+
+def run_task_safely(task, volume, reference, threads=1):
+    """`run_task`, with a failure (its own or its reference's) returned as
+    ``{"error": "Type: message"}`` instead of raised, so it is stored in the task's
+    row and reported once, not logged by a worker as a traceback."""
+    if "error" in reference:
+        return reference
+    try:
+        return run_task(task, volume, reference, threads)
+    except Exception as err:  # noqa: BLE001 - any failure of one task is that task's result
+        return _failure(err)
+
+
 def run_task(task, volume, reference, threads=1):
     """One noisy segmentation scored against the clean one: the task's row.
 
@@ -177,7 +201,11 @@ def _client(scheduler, workers):
     from dask.distributed import Client, LocalCluster
 
     if scheduler:
-        return Client(scheduler)
+        try:
+            return Client(scheduler, timeout="10s")
+        except (OSError, ValueError, TimeoutError) as err:
+            raise UsageError(f"--scheduler {scheduler}: cannot connect "
+                             f"({' '.join(str(err).split()) or type(err).__name__})") from None
     cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1,
                            processes=True, dashboard_address=None,
                            silence_logs=logging.ERROR)
@@ -216,9 +244,17 @@ def run(datasets, out_dir, *, operators=DEFAULT_OPERATORS, levels=DEFAULT_LEVELS
         raise UsageError(f"cut must be one of {CUTS}, got {cut!r}")
     from dask.distributed import as_completed
 
+    from volseg.io import FolderLock, OutputError
+
     out_dir = Path(out_dir)
     tasks = plan(datasets, operators, levels, seeds, regions, cut)
-    with _store(out_dir) as store:
+    out_dir.mkdir(parents=True, exist_ok=True)
+    lock = FolderLock(out_dir, "results", busy="another noise-stability run is using it")
+    try:
+        lock.acquire()  # two runs on one folder would compute the same tasks twice
+    except OutputError as err:
+        raise UsageError(str(err)) from None
+    with lock, _store(out_dir) as store:
         done = store.done_keys()
         pending = [t for t in tasks if store.key(t) not in done]
         counts = {"tasks": len(tasks), "already_done": len(tasks) - len(pending), "ran": 0,
@@ -239,22 +275,26 @@ def run(datasets, out_dir, *, operators=DEFAULT_OPERATORS, levels=DEFAULT_LEVELS
             for t in pending:
                 pair = (t["dataset"], t["operator"])
                 if pair not in references:
-                    references[pair] = client.submit(clean_reference, scattered[pair[0]],
+                    references[pair] = client.submit(clean_reference_safely, scattered[pair[0]],
                                                      pair[1], regions, pure=False)
             futures = {}
             run_token = uuid.uuid4().hex[:8]  # two runs on one scheduler never share keys
             for t in pending:
                 name = (f"noise-{t['dataset']}-{t['operator']}-{t['level']}-{t['seed']}-"
                         f"{run_token}")
-                future = client.submit(run_task, t, scattered[t["dataset"]],
+                future = client.submit(run_task_safely, t, scattered[t["dataset"]],
                                        references[(t["dataset"], t["operator"])], key=name)
                 futures[future] = t
+            errors = {}
             for future in as_completed(futures):
                 task = futures.pop(future)
                 try:
                     row = future.result()
-                except Exception as err:  # a failed task is recorded, the others go on
-                    store.record(task, status="failed", error=f"{type(err).__name__}: {err}")
+                except Exception as err:  # noqa: BLE001 - the worker died, or the like
+                    row = _failure(err)
+                if "error" in row:  # recorded with its error; the others go on
+                    store.record(task, status="failed", error=row["error"])
+                    errors[row["error"]] = errors.get(row["error"], 0) + 1
                     counts["failed"] += 1
                     progress.tick(failed=True)
                 else:
@@ -267,6 +307,8 @@ def run(datasets, out_dir, *, operators=DEFAULT_OPERATORS, levels=DEFAULT_LEVELS
             client.close()
             if cluster is not None:
                 cluster.close()
+        for error, n in errors.items():
+            say(f"{n} task{'s' if n > 1 else ''} failed with {error}")
         counts["seconds"] = time.perf_counter() - start
         return counts
 

@@ -11,6 +11,8 @@ import json
 import sqlite3
 from pathlib import Path
 
+from volseg import _json
+
 __all__ = ["ResultStore"]
 
 
@@ -24,7 +26,7 @@ class ResultStore:
     key_columns : sequence of str
         The columns that define a task (the primary key). Every other field of a
         recorded row is stored in a JSON column, so pipelines can add metrics
-        without a schema change.
+        without a schema change; it is strict JSON (a non-finite number is null).
     """
 
     def __init__(self, path, key_columns):
@@ -71,11 +73,11 @@ class ResultStore:
         data = {k: v for k, v in row.items() if k not in self.key_columns}
         marks = ", ".join("?" * (len(self.key_columns) + 3))
         self._db.execute(f"INSERT OR REPLACE INTO tasks VALUES ({marks})",
-                         (*self.key(row), status, error, json.dumps(data)))
+                         (*self.key(row), status, error, _json.dumps(data)))
         self._db.commit()
 
     def set_meta(self, name: str, value):
-        self._db.execute("INSERT OR REPLACE INTO meta VALUES (?, ?)", (name, json.dumps(value)))
+        self._db.execute("INSERT OR REPLACE INTO meta VALUES (?, ?)", (name, _json.dumps(value)))
         self._db.commit()
 
     def meta(self, name: str, default=None):

@@ -1,4 +1,5 @@
 import gzip
+import os
 
 import numpy as np
 import pytest
@@ -131,3 +132,211 @@ def test_errors_name_the_file_and_the_problem(tmp_path):
         write_volume(tmp_path / "x.tif", np.zeros((2, 2, 2)))
     assert not list(tmp_path.glob("x.tif*")) and not list(tmp_path.glob(".x.tif*"))
     assert io.DTYPES["uint8"] == "u1"
+
+
+# ---------------------------------------------------------------- frames (issue 11)
+
+ROTATED = np.array([[0.0, -2.0, 0.0, 10.0],   # voxel x -> world y (scaled 1.5)
+                    [1.5, 0.0, 0.0, -3.0],    # voxel y -> world -x (scaled 2)
+                    [0.0, 0.0, -4.0, 7.0],    # voxel z flipped
+                    [0.0, 0.0, 0.0, 1.0]])
+
+
+def test_nifti_frame_and_codes_survive_a_round_trip(tmp_path):
+    import nibabel
+
+    data = xyz_volume(dtype=np.int16)
+    image = nibabel.Nifti1Image(data, ROTATED)
+    image.header.set_sform(ROTATED, 4)
+    image.header.set_qform(ROTATED, 1)
+    nibabel.save(image, tmp_path / "scan.nii.gz")
+    volume = read_volume(tmp_path / "scan.nii.gz")
+    assert_array_equal(volume.data, data)
+    np.testing.assert_allclose(volume.affine, ROTATED)
+    assert (volume.frame.sform_code, volume.frame.qform_code) == (4, 1)
+    assert volume.spacing == (1.5, 2.0, 4.0)  # lengths of the affine's columns
+    write_volume(tmp_path / "out.nii.gz", data, frame=volume.frame)
+    back = nibabel.load(tmp_path / "out.nii.gz")
+    np.testing.assert_allclose(back.affine, ROTATED)
+    assert int(back.header["sform_code"]) == 4 and int(back.header["qform_code"]) == 1
+    np.testing.assert_allclose(back.header.get_qform(), ROTATED, atol=1e-6)
+
+
+def test_nrrd_space_directions_become_ras_and_round_trip(tmp_path):
+    data = xyz_volume(dtype=np.uint8)
+    header = ("NRRD0004\ntype: uchar\ndimension: 3\nspace: left-posterior-superior\n"
+              "sizes: 5 4 3\nspace directions: (0,-1.5,0) (2,0,0) (0,0,-4)\n"
+              "space origin: (-10,3,7)\nendian: little\nencoding: raw\n\n")
+    (tmp_path / "s.nrrd").write_bytes(header.encode() + raw_bytes(data))
+    volume = read_volume(tmp_path / "s.nrrd")
+    np.testing.assert_allclose(volume.affine, ROTATED)  # LPS -> RAS flips x and y
+    write_volume(tmp_path / "back.nrrd", data, frame=volume.frame)
+    again = read_volume(tmp_path / "back.nrrd")
+    np.testing.assert_allclose(again.affine, ROTATED)
+    assert_array_equal(again.data, data)
+
+
+# ---------------------------------------------------------------- confinement (issue 11)
+
+
+def test_detached_headers_read_only_their_own_folder(tmp_path):
+    from volseg.io import VolumeFileError
+
+    secret = tmp_path / "secret_5x4x3_uint8.raw"
+    secret.write_bytes(raw_bytes(xyz_volume(dtype=np.uint8)))
+    inner = tmp_path / "inner"
+    inner.mkdir()
+    for data_name in [str(secret), "../secret_5x4x3_uint8.raw"]:
+        (inner / "h.nhdr").write_text("NRRD0004\ntype: uchar\ndimension: 3\nsizes: 5 4 3\n"
+                                      f"encoding: raw\ndata file: {data_name}\n")
+        (inner / "h.dat").write_text(f"ObjectFileName: {data_name}\nResolution: 5 4 3\n")
+        for header in ["h.nhdr", "h.dat"]:
+            with pytest.raises(VolumeFileError, match=r"h\.(nhdr|dat): its .* outside the header's folder"):
+                read_volume(inner / header)
+            volume = read_volume(inner / header, allow_external_data=True)
+            assert volume.files == (inner / header, inner / data_name)
+    (inner / "link.raw").symlink_to(secret)  # a link out of the folder is outside too
+    (inner / "l.nhdr").write_text("NRRD0004\ntype: uchar\ndimension: 3\nsizes: 5 4 3\n"
+                                  "encoding: raw\ndata file: link.raw\n")
+    with pytest.raises(VolumeFileError, match="outside"):
+        read_volume(inner / "l.nhdr")
+
+
+# ---------------------------------------------------------------- hostile sizes (issue 11)
+
+
+def test_devices_pipes_and_folders_are_refused_without_opening(tmp_path):
+    from volseg.io import VolumeFileError
+
+    with pytest.raises(VolumeFileError, match="/dev/zero: is a character device"):
+        read_volume("/dev/zero", shape=(12, 10, 8))
+    fifo = tmp_path / "pipe_4x4x4_uint8.raw"
+    os.mkfifo(fifo)
+    with pytest.raises(VolumeFileError, match="is a named pipe"):
+        read_volume(fifo)  # opening it would block forever
+    with pytest.raises(VolumeFileError, match="is a folder"):
+        read_volume(tmp_path)
+    with pytest.raises(VolumeFileError, match="cannot be read"):
+        read_volume(tmp_path / ("x" * 300 + ".raw"))
+
+
+def _huge_nifti_gz(path):
+    """A 69-byte-scale .nii.gz whose header declares 2000^3 float64 voxels."""
+    import nibabel
+
+    header = nibabel.Nifti1Header()
+    header.set_data_shape((2000, 2000, 2000))
+    header.set_data_dtype(np.float64)
+    header["vox_offset"] = 352
+    raw = header.binaryblock + b"\0" * 4
+    path.write_bytes(gzip.compress(raw))
+
+
+def test_declared_sizes_are_checked_before_allocating(tmp_path):
+    import resource
+    import time
+
+    from volseg.io import VolumeFileError
+
+    _huge_nifti_gz(tmp_path / "huge.nii.gz")
+    nrrd_bomb = tmp_path / "bomb.nrrd"  # declares 4 KB, decompresses to 200 MB
+    nrrd_bomb.write_bytes(b"NRRD0004\ntype: uchar\ndimension: 3\nsizes: 16 16 16\n"
+                          b"encoding: gzip\n\n" + gzip.compress(bytes(200 << 20)))
+    raw = tmp_path / "tiny_4000x4000x4000_float64.raw"
+    raw.write_bytes(bytes(100))
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    for path, message in [(tmp_path / "huge.nii.gz", "expected 64000000352 bytes after "
+                           "decompression, found 352"),
+                          (nrrd_bomb, "hold more than the 4096 bytes"),
+                          (raw, "expected 512000000000 bytes")]:
+        start = time.perf_counter()
+        with pytest.raises(VolumeFileError, match=message):
+            read_volume(path)
+        assert time.perf_counter() - start < 1.0
+    grown_mb = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before) / 1024
+    assert grown_mb < 100
+
+
+@pytest.mark.parametrize("header, field", [
+    ("sizes: 5 x 3", "'sizes' field"),
+    ("sizes: 5 4 3\nspacings: 1 nan 1", "'spacings' field"),
+    ("sizes: 5 4 3\nbyte skip: lots", "'byte skip' field"),
+    ("sizes: 5 4 3\nspace directions: (1,0) (0,1,0) (0,0,1)", "'space directions' field"),
+    ("sizes: 5 4 3\nendian: middle", "'endian' field"),
+    ("sizes: 5 4 3\nspace directions: (1,0,0) (2,0,0) (0,0,1)", "singular"),
+])
+def test_nrrd_fields_that_do_not_parse_are_named(tmp_path, header, field):
+    from volseg.io import VolumeFileError
+
+    path = tmp_path / "f.nrrd"
+    path.write_bytes(f"NRRD0004\ntype: uchar\ndimension: 3\n{header}\nencoding: raw\n\n".encode()
+                     + bytes(60))
+    with pytest.raises(VolumeFileError, match=rf"f\.nrrd: .*{field}"):
+        read_volume(path)
+
+
+def test_npy_headers_that_do_not_parse_are_volume_file_errors(tmp_path):
+    from volseg.io import VolumeFileError
+
+    good = tmp_path / "g.npy"
+    np.save(good, np.zeros((3, 3, 3), np.float32))
+    text = good.read_bytes()
+    for n, broken in enumerate([text.replace(b"'descr'", b"'descr\""),
+                                text.replace(b"(3, 3, 3)", b"(3, 3, -3)"),
+                                text.replace(b"<f4", b"|O8"), text[:40]]):
+        (tmp_path / f"b{n}.npy").write_bytes(broken)
+        with pytest.raises(VolumeFileError, match=rf"b{n}\.npy"):
+            read_volume(tmp_path / f"b{n}.npy")
+
+
+# ---------------------------------------------------------------- output sets (issue 11)
+
+_KILL_MID_COMMIT = """
+import os, sys
+from pathlib import Path
+import volseg.io.output_set as output_set
+folder = Path(sys.argv[1])
+real, calls = os.replace, []
+def dying(src, dst):
+    calls.append(dst)
+    if len(calls) == {after}:
+        os._exit(9)  # as SIGKILL: no cleanup runs
+    return real(src, dst)
+with output_set.OutputSet(folder, "s", {{"a": "s_a.txt", "b": "s_b.txt", "c": "s_c.txt"}},
+                          force=True) as out:
+    output_set.os.replace = dying
+    out.commit(lambda paths: [p.write_text("new " + p.name) for p in paths.values()])
+"""
+
+
+@pytest.mark.parametrize("after", [2, 4, 6])  # journal only / old moved aside / one placed
+def test_a_commit_killed_between_renames_is_completed_by_the_next_writer(tmp_path, after):
+    import subprocess
+    import sys
+
+    from volseg.io import OutputSet
+
+    for name in ["s_a.txt", "s_b.txt", "s_c.txt"]:
+        (tmp_path / name).write_text("old " + name)
+    run = subprocess.run([sys.executable, "-c", _KILL_MID_COMMIT.format(after=after),
+                          str(tmp_path)])
+    assert run.returncode == 9
+    with OutputSet(tmp_path, "s", {"a": "s_a.txt"}, force=True) as out:
+        assert out.recovered and "completed an interrupted commit" in out.recovered[0]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s_a.txt", "s_b.txt", "s_c.txt"]
+    assert {p.read_text() for p in tmp_path.iterdir()} == {f"new s_{k}.txt" for k in "abc"}
+
+
+def test_output_set_refuses_existing_files_and_removes_its_staging(tmp_path):
+    from volseg.io import OutputError, OutputSet
+
+    names = {"a": "s_a.txt", "b": "s_b.txt"}
+    with OutputSet(tmp_path, "s", names) as out:
+        assert out.commit(lambda p: [f.write_text("1") for f in p.values()]) == {
+            "a": tmp_path / "s_a.txt", "b": tmp_path / "s_b.txt"}
+    with pytest.raises(OutputError, match="s_a.txt exists .* use --force"):
+        OutputSet(tmp_path, "s", names).acquire()
+    with OutputSet(tmp_path, "s", names, force=True) as out, pytest.raises(RuntimeError, match="s_b"):
+        out.commit(lambda p: p["a"].write_text("2"))  # a writer that forgot a file
+    assert (tmp_path / "s_a.txt").read_text() == "1"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s_a.txt", "s_b.txt"]

@@ -105,3 +105,22 @@ def test_mesh_functions_do_not_modify_inputs():
     mesh.vertex_volumes(v, s)
     assert_array_equal(v, v0)
     assert_array_equal(s, s0)
+
+
+def test_pinched_vertex_and_empty_mesh_are_refused():
+    from volseg import tessellation, vertex_curvature
+    from volseg.mesh import pinched_vertices
+
+    v, s = tessellation.sphere(dim=3, radius=1.0, subdivisions=1)
+    assert len(pinched_vertices(s)) == 0
+    # A second sphere, reflected through vertex 0 and sharing it: two 3-spheres touching.
+    s2 = s + len(v)
+    s2[s2 == len(v)] = 0
+    vertices = np.concatenate([v, 2 * v[0] - v])
+    simplices = np.concatenate([s, s2[:, [1, 0, 2, 3]]])
+    assert pinched_vertices(simplices, len(vertices)).tolist() == [0]
+    for operator in ["weighted", "laplace_beltrami", "intrinsic"]:
+        with pytest.raises(ValueError, match="1 vertices are pinched .* vertex 0"):
+            vertex_curvature(vertices, simplices, operator)
+    with pytest.raises(ValueError, match="no simplices"):
+        vertex_curvature(np.zeros((0, 4)), np.zeros((0, 4), int))

@@ -206,3 +206,47 @@ def test_dense_cross_cell_edges_match_a_reference_sweep():
     assert len(hierarchy.maxima) == 60
     got = np.sort(hierarchy.values[hierarchy.young] - hierarchy.saddle_value)
     np.testing.assert_allclose(got, _reference_persistence(values, edges.tolist()))
+
+
+# ---------------------------------------------------------------- adjacency is structure (issue 11)
+
+
+@pytest.mark.parametrize("weight", [0.5, 128, 256, -1.0, 1e-300])
+def test_weighted_sparse_adjacency_is_read_as_structure(weight):
+    from scipy import sparse
+
+    field = np.array([0.0, 3.0, 1.0, 2.0, 0.5])
+    edges = np.array([[0, 1], [1, 2], [2, 3], [3, 4]])
+    reference = descending_complex(field, adjacency=edges)
+    matrix = sparse.coo_array((np.full(4, weight), (edges[:, 0], edges[:, 1])), shape=(5, 5))
+    for m in (matrix, matrix.tocsr(), sparse.csr_matrix(matrix)):
+        result = descending_complex(field, adjacency=m)
+        assert_array_equal(result.segment(), reference.segment())
+        assert_array_equal(result.persistence, reference.persistence)
+
+
+def test_duplicate_entries_that_sum_to_zero_are_still_an_edge():
+    from scipy import sparse
+
+    field = np.array([0.0, 3.0, 1.0])
+    matrix = sparse.coo_array(([1.0, -1.0, 1.0], ([0, 0, 1], [1, 1, 2])), shape=(3, 3))
+    assert len(descending_complex(field, adjacency=matrix).maxima) == 1
+
+
+def test_dense_square_adjacency_is_refused_as_ambiguous():
+    with pytest.raises(ValueError, match=r"dense 2 x 2 array: pass .*csr_array"):
+        descending_complex(np.array([1.0, 2.0]), adjacency=np.array([[0, 1], [1, 0]]))
+
+
+@pytest.mark.parametrize("call, message", [
+    (lambda h: h.segment(n_regions=2.5), "`n_regions` must be an integer"),
+    (lambda h: h.segment(n_regions=True), "`n_regions` must be an integer"),
+    (lambda h: h.segment(min_persistence=-1), "non-negative"),
+    (lambda h: h.segment(min_persistence=float("nan")), "non-negative"),
+    (lambda h: h.threshold_for(0), "at least 1"),
+    (lambda h: h.region_adjacency(np.zeros((3, 3), int)), r"field's shape \(4, 4, 4\)"),
+])
+def test_cut_arguments_are_checked_with_their_names(call, message):
+    hierarchy = descending_complex(np.random.default_rng(0).random((4, 4, 4)))
+    with pytest.raises(ValueError, match=message):
+        call(hierarchy)

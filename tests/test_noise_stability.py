@@ -112,12 +112,16 @@ def test_small_run_on_a_local_cluster_then_a_rerun_does_no_work(tiny, tmp_path, 
     assert (out / ns.DB_NAME).read_bytes() == before
 
 
-def test_a_failing_task_is_recorded_and_the_others_finish(tmp_path):
+def test_a_failing_task_is_recorded_and_the_others_finish(tmp_path, capfd):
     good = ("good", _volume(3), "g" * 64)
     flat = ("flat", np.zeros((16, 16), dtype=np.uint8), "f" * 64)  # 2-D: segmenting fails
+    said = []
     counts = ns.run([good, flat], tmp_path, operators=["weighted"], levels=[0.0, 1.0],
-                    seeds=1, regions=5, workers=1)
+                    seeds=1, regions=5, workers=1, say=said.append)
     assert counts["ran"] == 2 and counts["failed"] == 2
+    # The error is said once, in one line; no worker prints a traceback.
+    assert said[-1] == "2 tasks failed with ValueError: `volume` must be 3-D, got shape (16, 16)"
+    assert "Compute Failed" not in capfd.readouterr().err
     with ResultStore(tmp_path / ns.DB_NAME, ns.KEY_COLUMNS) as store:
         failed = store.rows("failed")
         assert {r["dataset"] for r in failed} == {"flat"}
@@ -212,3 +216,22 @@ def test_a_results_file_with_other_keys_is_refused(tmp_path, capsys):
         store.record({"dataset": "x", "level": 1.0, "similarity": 0.5})
     assert ns.main(["--out", str(tmp_path), "--report-only"]) == 2
     assert "another version" in capsys.readouterr().err
+
+
+def test_unreachable_or_malformed_scheduler_is_one_line_exit_2(tiny, tmp_path, capsys):
+    for address, message in [("not-an-address", "missing port number"),
+                             ("tcp://127.0.0.1:9", "cannot connect")]:
+        assert ns.main(["--out", str(tmp_path), "--datasets", tiny[0], "--seeds", "1",
+                        "--levels", "0", "--operators", "weighted", "--scheduler", address,
+                        "-q"]) == 2
+        err = capsys.readouterr().err
+        assert len(err.strip().splitlines()) == 1 and address in err and message in err
+
+
+def test_two_runs_on_one_folder_do_not_compute_the_same_tasks(tiny, tmp_path, capsys):
+    from volseg.io import FolderLock
+
+    with FolderLock(tmp_path, "results"):
+        assert ns.main(["--out", str(tmp_path), "--datasets", tiny[0], "--seeds", "1",
+                        "--levels", "0", "--operators", "weighted", "-q"]) == 2
+    assert "another noise-stability run is using it" in capsys.readouterr().err

@@ -33,3 +33,16 @@ def test_segment_errors():
         segment_volume(np.zeros((4, 4, 4)), n_regions=2, min_persistence=1.0)
     with pytest.raises(ValueError, match="unknown `operator`"):
         segment_volume(np.zeros((4, 4, 4)), operator="nope")
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"spacing": (1.0, 2.0)}, "`spacing` must be three positive numbers"),
+    ({"spacing": (1.0, -1.0, 1.0)}, "`spacing` must be three positive numbers"),
+    ({"n_regions": 2.5}, "`n_regions` must be an integer"),
+    ({"min_persistence": -0.1}, "`min_persistence` must be a non-negative number"),
+])
+def test_bad_arguments_name_themselves(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        segment_volume(np.random.default_rng(0).random((6, 6, 6)), **kwargs)
+    with pytest.raises(ValueError, match="`volume` must be 3-D"):
+        segment_volume(np.zeros((6, 6)))

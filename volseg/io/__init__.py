@@ -7,10 +7,10 @@ input's frame, and the all-or-nothing writer of a result's output files.
 - `OutputSet`: lock, check, stage and commit the files of one result.
 """
 
-from .output_set import OutputError, OutputSet, recover
+from .output_set import FolderLock, OutputError, OutputSet, recover
 from .readers import DTYPES, read_volume
 from .volume import Frame, Volume, VolumeFileError
 from .writers import atomic_path, write_volume
 
 __all__ = ["Volume", "Frame", "VolumeFileError", "read_volume", "write_volume", "atomic_path",
-           "OutputSet", "OutputError", "recover", "DTYPES"]
+           "OutputSet", "OutputError", "FolderLock", "recover", "DTYPES"]

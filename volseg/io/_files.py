@@ -65,7 +65,7 @@ def confined(header: Path, name: str, field: str, allow_external: bool) -> Path:
     Raises
     ------
     VolumeFileError
-        The name is empty, absolute or climbs out of the header's folder (``..``,
+        The file does not exist, or the name is empty, absolute or climbs out of the header's folder (``..``,
         a symbolic link), unless `allow_external` is true.
     """
     name = name.strip()
@@ -74,6 +74,12 @@ def confined(header: Path, name: str, field: str, allow_external: bool) -> Path:
     if "\0" in name:
         raise VolumeFileError(f"{header}: the {field!r} field holds a NUL byte")
     target = header.parent / name
+    try:
+        exists = target.exists()
+    except OSError as err:
+        raise VolumeFileError(f"{header}: its {field!r} {name!r} cannot be read ({err.strerror})") from None
+    if not exists:
+        raise VolumeFileError(f"{header}: its {field!r} {name!r} does not exist ({target})")
     if allow_external:
         return target
     base = header.parent.resolve()

@@ -26,7 +26,7 @@ import stat
 import tempfile
 from pathlib import Path
 
-__all__ = ["OutputSet", "OutputError", "recover"]
+__all__ = ["OutputSet", "OutputError", "FolderLock", "recover"]
 
 _STAGING = ".volseg-staging-"
 _JOURNAL = "COMMIT"
@@ -34,6 +34,66 @@ _JOURNAL = "COMMIT"
 
 class OutputError(ValueError):
     """The outputs cannot be written as asked (exist, locked, not a file)."""
+
+
+class FolderLock:
+    """An advisory lock (``flock``) on ``<folder>/.<name>.volseg-lock``, per name.
+
+    Taken at once or refused with `OutputError` (unless ``wait``); the lock file is
+    removed on release. A process that opened the file just as its holder removed it
+    notices (the path no longer names its file) and takes the new one, so two
+    processes never both hold it.
+    """
+
+    def __init__(self, folder, name: str, *, wait: bool = False, busy: str = "it is in use"):
+        self.folder = Path(folder)
+        self.path = self.folder / f".{name}.volseg-lock"
+        self.wait = wait
+        self.busy = busy
+        self._fd = None
+
+    @property
+    def held(self) -> bool:
+        return self._fd is not None
+
+    def __enter__(self) -> FolderLock:
+        self.acquire()
+        return self
+
+    def __exit__(self, *exc):
+        self.release()
+
+    def acquire(self):
+        while self._fd is None:
+            try:
+                fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+            except OSError as err:
+                raise OutputError(f"{self.folder}: cannot create a lock file there "
+                                  f"({err.strerror})") from None
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | (0 if self.wait else fcntl.LOCK_NB))
+            except OSError as err:
+                os.close(fd)
+                if err.errno not in (errno.EWOULDBLOCK, errno.EAGAIN):
+                    raise
+                raise OutputError(f"{self.folder}: {self.busy}; wait for it to finish, "
+                                  "or use --wait") from None
+            try:
+                same = os.path.samestat(os.fstat(fd), os.stat(self.path))
+            except FileNotFoundError:
+                same = False
+            if same:
+                self._fd = fd
+                os.ftruncate(fd, 0)
+                os.write(fd, f"{os.getpid()}\n".encode())
+            else:
+                os.close(fd)
+
+    def release(self):
+        if self._fd is not None:
+            self.path.unlink(missing_ok=True)
+            os.close(self._fd)
+            self._fd = None
 
 
 def _staging_prefix(stem: str) -> str:
@@ -94,8 +154,8 @@ class OutputSet:
         self.force = force
         self.wait = wait
         self.recovered: list[str] = []
-        self._lock_path = self.folder / f".{stem}.volseg-lock"
-        self._fd = None
+        self._lock = FolderLock(self.folder, stem, wait=wait,
+                                busy=f"another volseg process is writing {stem}_* there")
 
     # ------------------------------------------------------------ lock
 
@@ -108,43 +168,16 @@ class OutputSet:
 
     def acquire(self):
         """Take the lock, finish or remove stale staging, check the targets."""
-        while self._fd is None:
-            try:
-                fd = os.open(self._lock_path, os.O_RDWR | os.O_CREAT, 0o644)
-            except OSError as err:
-                raise OutputError(f"{self.folder}: cannot create a lock file there "
-                                  f"({err.strerror})") from None
-            try:
-                fcntl.flock(fd, fcntl.LOCK_EX | (0 if self.wait else fcntl.LOCK_NB))
-            except OSError as err:
-                os.close(fd)
-                if err.errno not in (errno.EWOULDBLOCK, errno.EAGAIN):
-                    raise
-                raise OutputError(
-                    f"{self.folder}: another volseg process is writing {self.stem}_* there; "
-                    "wait for it to finish, or use --wait") from None
-            try:
-                same = os.path.samestat(os.fstat(fd), os.stat(self._lock_path))
-            except FileNotFoundError:
-                same = False
-            if same:  # else the holder removed the file as we opened it: take the new one
-                self._fd = fd
-                os.ftruncate(fd, 0)
-                os.write(fd, f"{os.getpid()}\n".encode())
-            else:
-                os.close(fd)
+        self._lock.acquire()
         try:
             self.recovered = recover(self.folder, self.stem)
             self.check()
         except BaseException:
-            self.release()
+            self._lock.release()
             raise
 
     def release(self):
-        if self._fd is not None:
-            self._lock_path.unlink(missing_ok=True)
-            os.close(self._fd)
-            self._fd = None
+        self._lock.release()
 
     def check(self):
         """Refuse targets that exist (without `force`) or are not regular files."""
@@ -167,7 +200,7 @@ class OutputSet:
     def commit(self, write) -> dict:
         """Write the set: ``write(paths)`` fills ``paths[kind]`` (staging files), then
         they replace the targets together. Returns kind -> final path."""
-        if self._fd is None:
+        if not self._lock.held:
             raise RuntimeError("OutputSet.commit needs the lock: use it in a `with` block")
         staging = Path(tempfile.mkdtemp(prefix=_staging_prefix(self.stem), dir=self.folder))
         try:

@@ -215,7 +215,7 @@ def _read_nrrd(path: Path, shape, dtype, byte_order, allow_external):
     shape = shape or sizes
     name = fields.get("data file", fields.get("datafile"))
     if name is not None:
-        if name.split()[0].upper() == "LIST" or "%" in name:
+        if name.split()[:1] == ["LIST"] or "%" in name:
             raise VolumeFileError(f"{path}: multi-file NRRD ('data file: {name}') is not supported")
         data_path, offset, files = confined(path, name, "data file", allow_external), 0, None
         files = (path, data_path)
@@ -257,6 +257,9 @@ def _read_nifti(path: Path, shape, dtype, byte_order, allow_external):
         raise
     except Exception as err:  # nibabel's ImageFileError, HeaderDataError, EOFError, zlib ...
         raise VolumeFileError(f"{path}: not a readable NIfTI header ({type(err).__name__}: {err})") from None
+    if offset < int(header["sizeof_hdr"]):
+        raise VolumeFileError(f"{path}: the 'vox_offset' field ({offset}) puts the data inside "
+                              f"the {int(header['sizeof_hdr'])}-byte header")
     expected = expected_bytes(path, data_shape, dt) + offset
     if path.name.lower().endswith(".gz"):
         # Decompress only what the header declares, in bounded pieces.

@@ -1,0 +1,272 @@
+"""The command line under hostile and careless use (issue 11): every bad input a clean
+exit 2 with one line naming the problem, outputs written as a set or not at all."""
+
+import gzip
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+
+import nibabel
+import numpy as np
+import pytest
+
+from volseg.cli import main
+from volseg.io import OutputSet
+
+ROTATED = np.array([[0.0, -2.0, 0.0, 10.0], [1.5, 0.0, 0.0, -3.0], [0.0, 0.0, -4.0, 7.0],
+                    [0.0, 0.0, 0.0, 1.0]])
+KINDS = ("labels.nii.gz", "curvature.nii.gz", "summary.json", "preview.png")
+
+
+def _blob(shape=(12, 10, 8)):
+    x, y, z = np.meshgrid(*[np.linspace(-1, 1, s) for s in shape], indexing="ij")
+    return np.round(200 * np.exp(-3 * ((x - 0.3) ** 2 + y**2 + z**2))
+                    + 120 * np.exp(-4 * ((x + 0.4) ** 2 + (y - 0.2) ** 2 + z**2))).astype(np.uint8)
+
+
+def _raw(path, data):
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_bytes(np.ascontiguousarray(data.transpose(2, 1, 0)).tobytes())
+    return path
+
+
+def _one_clean_line(err):
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in err, err
+    return lines[0]
+
+
+def _visible(folder):
+    return sorted(p.name for p in folder.iterdir() if not p.name.startswith(".")) \
+        if folder.exists() else []
+
+
+def test_outputs_keep_a_rotated_flipped_translated_frame(tmp_path):
+    image = nibabel.Nifti1Image(_blob(), ROTATED)
+    image.header.set_sform(ROTATED, 4)
+    image.header.set_qform(ROTATED, 1)
+    nibabel.save(image, tmp_path / "scan.nii.gz")
+    assert main(["segment", str(tmp_path / "scan.nii.gz"), "-o", str(tmp_path / "out"), "-q",
+                 "--regions", "2"]) == 0
+    for kind in ("labels", "curvature"):
+        out = nibabel.load(tmp_path / "out" / f"scan_{kind}.nii.gz")
+        np.testing.assert_allclose(out.affine, ROTATED)
+        assert (int(out.header["sform_code"]), int(out.header["qform_code"])) == (4, 1)
+    summary = json.loads((tmp_path / "out" / "scan_summary.json").read_text())
+    np.testing.assert_allclose(summary["affine"], ROTATED)
+    assert summary["spacing"] == [1.5, 2.0, 4.0]
+
+
+def test_nrrd_frame_reaches_the_nifti_outputs(tmp_path):
+    header = ("NRRD0004\ntype: uchar\ndimension: 3\nspace: left-posterior-superior\n"
+              "sizes: 12 10 8\nspace directions: (0,-1.5,0) (2,0,0) (0,0,-4)\n"
+              "space origin: (-10,3,7)\nencoding: raw\n\n")
+    (tmp_path / "s.nrrd").write_bytes(header.encode()
+                                      + np.ascontiguousarray(_blob().transpose(2, 1, 0)).tobytes())
+    assert main(["segment", str(tmp_path / "s.nrrd"), "-o", str(tmp_path), "-q"]) == 0
+    np.testing.assert_allclose(nibabel.load(tmp_path / "s_labels.nii.gz").affine, ROTATED)
+
+
+def test_detached_header_outside_its_folder_is_refused(tmp_path, capsys):
+    secret = _raw(tmp_path / "private" / "secret.bin", _blob())
+    header = tmp_path / "h" / "scan.nhdr"
+    header.parent.mkdir()
+    for name in [str(secret), "../private/secret.bin"]:
+        header.write_text("NRRD0004\ntype: uchar\ndimension: 3\nsizes: 12 10 8\nencoding: raw\n"
+                          f"data file: {name}\n")
+        assert main(["segment", str(header), "-o", str(tmp_path / "out"), "-q"]) == 2
+        line = _one_clean_line(capsys.readouterr().err)
+        assert "scan.nhdr" in line and name in line and "--allow-external-data" in line
+        assert _visible(tmp_path / "out") == []
+    assert main(["segment", str(header), "-o", str(tmp_path / "out"), "-q",
+                 "--allow-external-data"]) == 0
+    summary = json.loads((tmp_path / "out" / "scan_summary.json").read_text())
+    import hashlib
+
+    expected = hashlib.sha256(header.read_bytes() + secret.read_bytes()).hexdigest()
+    assert summary["input_sha256"] == expected  # every byte read: header and data
+    assert summary["input_files"] == [str(header), str(header.parent / "../private/secret.bin")]
+
+
+def test_two_inputs_with_one_output_stem_are_refused_before_computing(tmp_path, capsys):
+    a = _raw(tmp_path / "a" / "s_12x10x8_uint8.raw", _blob())
+    b = _raw(tmp_path / "b" / "s_12x10x8_uint8.raw", _blob()[::-1].copy())
+    out = tmp_path / "out"
+    assert main(["segment", "--force", "-o", str(out), str(a), str(b), "-q"]) == 2
+    line = _one_clean_line(capsys.readouterr().err)
+    assert str(a) in line and str(b) in line and "s_*" in line
+    assert _visible(out) == [] and not out.exists() or not list(out.iterdir())
+
+
+def test_existing_outputs_of_any_input_are_refused_up_front(tmp_path, capsys):
+    a = _raw(tmp_path / "a_12x10x8_uint8.raw", _blob())
+    b = _raw(tmp_path / "b_12x10x8_uint8.raw", _blob()[::-1].copy())
+    out = tmp_path / "out"
+    assert main(["segment", str(b), "-o", str(out), "-q"]) == 0
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    assert main(["segment", str(a), str(b), "-o", str(out), "-q"]) == 2
+    assert "b_labels.nii.gz exists" in _one_clean_line(capsys.readouterr().err)
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before  # a's set not written
+
+
+def test_a_second_writer_fails_at_once_or_waits(tmp_path, capsys):
+    source = _raw(tmp_path / "w_12x10x8_uint8.raw", _blob())
+    out = tmp_path / "out"
+    out.mkdir()
+    names = {k: f"w_{k}" for k in ("labels.nii.gz",)}
+    with OutputSet(out, "w", names):
+        start = time.perf_counter()
+        assert main(["segment", str(source), "-o", str(out), "-q"]) == 2
+        assert time.perf_counter() - start < 5
+        assert "another volseg process is writing w_*" in _one_clean_line(capsys.readouterr().err)
+    holder = OutputSet(out, "w", names)
+    holder.acquire()
+    threading.Timer(1.0, holder.release).start()
+    start = time.perf_counter()
+    assert main(["segment", str(source), "-o", str(out), "-q", "--wait"]) == 0
+    assert time.perf_counter() - start >= 0.9
+    assert _visible(out) == sorted(f"w_{k}" for k in KINDS)
+    assert not [p for p in out.iterdir() if p.name.startswith(".")]  # lock and staging gone
+
+
+def test_a_folder_in_place_of_an_output_is_refused_and_nothing_moves(tmp_path, capsys):
+    source = _raw(tmp_path / "f_12x10x8_uint8.raw", _blob())
+    out = tmp_path / "out"
+    assert main(["segment", str(source), "-o", str(out), "-q"]) == 0
+    (out / "f_preview.png").unlink()
+    (out / "f_preview.png").mkdir()
+    before = {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()}
+    assert main(["segment", str(source), "-o", str(out), "-q", "--force", "--regions", "1"]) == 2
+    assert "f_preview.png: exists and is not a regular file" in capsys.readouterr().err
+    assert {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()} == before
+
+
+def test_a_failing_rename_rolls_back_to_the_complete_old_set(tmp_path, monkeypatch):
+    import volseg.io.output_set as output_set
+
+    source = _raw(tmp_path / "r_12x10x8_uint8.raw", _blob())
+    out = tmp_path / "out"
+    assert main(["segment", str(source), "-o", str(out), "-q"]) == 0
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    real_replace, calls = os.replace, []
+
+    def flaky(src, dst):
+        calls.append(dst)
+        if len(calls) == 6:  # 4 old files moved aside, 1 new one placed, then a failure
+            raise OSError(28, "No space left on device", str(dst))
+        return real_replace(src, dst)
+
+    monkeypatch.setattr(output_set.os, "replace", flaky)
+    assert main(["segment", str(source), "-o", str(out), "-q", "--force", "--regions", "1"]) == 2
+    monkeypatch.undo()
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+
+
+@pytest.mark.parametrize("make, message", [
+    (lambda d: "/dev/zero", "is a character device"),
+    (lambda d: (os.mkfifo(d / "p_4x4x4_uint8.raw"), d / "p_4x4x4_uint8.raw")[1], "is a named pipe"),
+    (lambda d: d / ("n" * 300 + ".raw"), "File name too long"),
+    (lambda d: (d / "x.nii.gz").write_bytes(b"\x1f\x8b garbage") and d / "x.nii.gz", "x.nii.gz"),
+    (lambda d: (d / "t.npy").write_bytes(b"\x93NUMPY\x01\x00\x10\x00{'descr': <f4 }\n")
+     and d / "t.npy", "not a plain .npy array"),
+    (lambda d: (d / "h.nrrd").write_bytes(b"NRRD0004\ntype: uchar\nsizes: 4 four 4\n\n")
+     and d / "h.nrrd", "'sizes' field"),
+])
+def test_hostile_inputs_exit_2_with_one_line(tmp_path, make, message):
+    # A subprocess, so a hang (a pipe opened for reading) fails the test instead of blocking it.
+    target = make(tmp_path)
+    run = subprocess.run([sys.executable, "-m", "volseg", "segment", str(target), "--shape",
+                          "4", "4", "4", "-o", str(tmp_path / "out"), "-q"],
+                         capture_output=True, text=True, timeout=60)
+    assert run.returncode == 2, run.stderr
+    assert message in _one_clean_line(run.stderr)
+    assert _visible(tmp_path / "out") == []
+
+
+def test_huge_declared_nifti_is_refused_fast(tmp_path):
+    header = nibabel.Nifti1Header()
+    header.set_data_shape((2000, 2000, 2000))
+    header.set_data_dtype(np.float64)
+    header["vox_offset"] = 352
+    (tmp_path / "big.nii.gz").write_bytes(gzip.compress(header.binaryblock + bytes(4)))
+    start = time.perf_counter()
+    assert main(["segment", str(tmp_path / "big.nii.gz"), "-o", str(tmp_path), "-q"]) == 2
+    assert time.perf_counter() - start < 1.0
+
+
+def test_demo_needs_force_to_replace(tmp_path, capsys):
+    out = tmp_path / "demo"
+    assert main(["demo", "-o", str(out), "-q"]) == 0
+    assert main(["demo", "-o", str(out), "-q"]) == 2
+    assert "use --force" in capsys.readouterr().err
+    assert main(["demo", "-o", str(out), "-q", "--force"]) == 0
+
+
+def test_summary_is_strict_json(tmp_path):
+    from volseg import _json
+
+    assert json.loads(_json.dumps({"p": [float("inf"), np.float32(1.5), np.nan]})) == \
+        {"p": [None, 1.5, None]}
+    source = _raw(tmp_path / "j_12x10x8_uint8.raw", _blob())
+    assert main(["segment", str(source), "-o", str(tmp_path), "-q"]) == 0
+
+    def refuse(token):
+        raise ValueError(f"non-strict JSON token {token}")
+
+    json.loads((tmp_path / "j_summary.json").read_text(), parse_constant=refuse)
+
+
+def _segment_process(source, out):
+    return subprocess.Popen([sys.executable, "-m", "volseg", "segment", str(source), "-o",
+                             str(out), "-q", "--force"], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, text=True)
+
+
+def test_sigterm_cleans_staging_and_releases_the_lock(tmp_path):
+    source = _raw(tmp_path / "t_96x96x96_uint8.raw", _blob((96, 96, 96)))
+    out = tmp_path / "out"
+    process = _segment_process(source, out)
+    deadline = time.monotonic() + 30
+    while not (out.exists() and any(p.name.startswith(".t.") for p in out.iterdir())):
+        assert time.monotonic() < deadline and process.poll() is None
+        time.sleep(0.01)
+    process.send_signal(signal.SIGTERM)
+    assert process.wait(timeout=30) == 130
+    assert "interrupted" in process.stderr.read()
+    assert list(out.iterdir()) == []  # no staging, no lock, no half set
+
+
+def test_sigkill_at_random_moments_leaves_no_set_or_one_complete_set(tmp_path):
+    from volseg.io import recover
+
+    source = _raw(tmp_path / "k_24x24x24_uint8.raw", _blob((24, 24, 24)))
+    complete = sorted(f"k_{k}" for k in KINDS)
+    rng = np.random.default_rng(7)
+    outcomes, stale = [], []
+    for run in range(20):
+        out = tmp_path / f"out{run}"
+        process = _segment_process(source, out)
+        time.sleep(float(rng.uniform(0.3, 2.0)))
+        process.kill()
+        process.wait()
+        visible = _visible(out)
+        hidden = [p for p in out.iterdir() if p.name.startswith(".")] if out.exists() else []
+        if visible not in ([], complete):
+            # Killed between the renames of a commit: its journal completes it.
+            assert any((p / "COMMIT").exists() for p in hidden), visible
+            recover(out, "k")
+            visible = _visible(out)
+        assert visible in ([], complete), visible
+        outcomes.append(len(visible))
+        if hidden:
+            stale.append(out)
+    assert 0 in outcomes and 4 in outcomes, outcomes  # kills before and after the commit
+    assert stale  # some kills left a lock file or a staging folder behind ...
+    for out in stale:  # ... which the next run in that folder removes
+        assert main(["segment", str(source), "-o", str(out), "-q", "--force"]) == 0
+        assert [p.name for p in out.iterdir() if p.name.startswith(".")] == []
+        assert _visible(out) == complete
