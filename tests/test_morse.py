@@ -250,3 +250,60 @@ def test_cut_arguments_are_checked_with_their_names(call, message):
     hierarchy = descending_complex(np.random.default_rng(0).random((4, 4, 4)))
     with pytest.raises(ValueError, match=message):
         call(hierarchy)
+
+
+# ---------------------------------------------------------------- masks (issue 13)
+
+
+def _restricted_adjacency(mask, connectivity="kuhn"):
+    """Edges of the grid connectivity between masked voxels, in compact ids (the
+    masked voxels in flat order)."""
+    compact = np.full(mask.size, -1)
+    compact[np.flatnonzero(mask)] = np.arange(mask.sum())
+    compact = compact.reshape(mask.shape)
+    rows, cols = [], []
+    for step in grid_offsets(mask.ndim, connectivity):
+        if tuple(step) <= (0,) * mask.ndim:
+            continue
+        src = tuple(slice(max(-s, 0), n - max(s, 0)) for s, n in zip(step, mask.shape, strict=True))
+        dst = tuple(slice(max(s, 0), n - max(-s, 0)) for s, n in zip(step, mask.shape, strict=True))
+        both = mask[src] & mask[dst]
+        rows.append(compact[src][both])
+        cols.append(compact[dst][both])
+    rows, cols = np.concatenate(rows), np.concatenate(cols)
+    return sparse.coo_array((np.ones(len(rows)), (rows, cols)), shape=(mask.sum(),) * 2)
+
+
+@pytest.mark.parametrize("connectivity", ["kuhn", 6, 26])
+@pytest.mark.parametrize("kind", ["smooth", "ties", "two-components"])
+def test_masked_grid_equals_the_explicit_restricted_graph(connectivity, kind):
+    rng = np.random.default_rng(5)
+    field = smooth_random_field((18, 15, 12), rng)
+    if kind == "ties":
+        field = np.round(field * 4) / 4  # plateaus and exact ties everywhere
+    mask = field > np.quantile(field, 0.45)
+    if kind == "two-components":
+        mask[8:10] = False
+    field = np.where(mask, field, np.nan)  # values outside the mask are never read
+    grid = descending_complex(field, mask=mask, connectivity=connectivity)
+    graph = descending_complex(field[mask], adjacency=_restricted_adjacency(mask, connectivity))
+    where = np.flatnonzero(mask)
+    assert_array_equal(grid.maxima, where[graph.maxima])
+    assert_array_equal(grid.persistence, graph.persistence)
+    assert_array_equal(grid.saddle, where[graph.saddle])
+    assert grid.n_components == graph.n_components
+    for cut in [{}, {"n_regions": 5}, {"min_persistence": 0.05}]:
+        labels = grid.segment(**cut)
+        assert (labels[~mask] == 0).all()
+        assert_array_equal(labels[mask], graph.segment(**cut) + 1)
+    labels = grid.segment(n_regions=5)
+    adjacency = grid.region_adjacency(labels)
+    assert sorted(adjacency.nodes) == list(range(1, labels.max() + 1))
+
+
+def test_mask_errors():
+    field = np.zeros((4, 4, 4))
+    with pytest.raises(ValueError, match="boolean array of the field's shape"):
+        descending_complex(field, mask=np.ones((4, 4), bool))
+    with pytest.raises(ValueError, match="selects no vertex"):
+        descending_complex(field, mask=np.zeros((4, 4, 4), bool))

@@ -13,7 +13,9 @@ def test_segment_volume_defaults_to_30_regions_and_accepts_volume_or_array():
     np.testing.assert_array_equal(again.labels, result.labels)
     recut = result.hierarchy.segment(n_regions=10)
     assert recut.max() + 1 == 10
-    assert result.labels[np.unravel_index(result.region_maxima()[0], data.shape)] == 0
+    # Regions are 1..k (0 is kept for voxels outside a mask); region 1 has the top maximum.
+    assert result.labels.min() == 1 and result.labels.max() == 30
+    assert result.labels[np.unravel_index(result.region_maxima()[0], data.shape)] == 1
 
 
 def test_blob_centres_are_curvature_maxima():
@@ -46,3 +48,73 @@ def test_bad_arguments_name_themselves(kwargs, message):
         segment_volume(np.random.default_rng(0).random((6, 6, 6)), **kwargs)
     with pytest.raises(ValueError, match="`volume` must be 3-D"):
         segment_volume(np.zeros((6, 6)))
+
+
+# ---------------------------------------------------------------- masks and smoothing (issue 13)
+
+
+def _two_blobs(n=24, background=0.0):
+    axis = np.linspace(-1, 1, n)
+    x, y, z = np.meshgrid(axis, axis, axis, indexing="ij")
+    f = sum(np.exp(-((x - a) ** 2 + y**2 + z**2) / 0.03) for a in (-0.5, 0.5))
+    return np.where(f > 0.05, np.round(200 * f), background)
+
+
+def test_zero_background_and_two_blobs_give_exactly_two_foreground_regions():
+    volume = _two_blobs()
+    result = segment_volume(volume, mask="auto", min_persistence=0.05)
+    assert result.mask.used == "nonzero"
+    assert ((result.labels == 0) == (volume == 0)).all()
+    assert sorted(np.unique(result.labels)) == [0, 1, 2]
+    left, right = result.labels[6, 12, 12], result.labels[17, 12, 12]
+    assert {left, right} == {1, 2}
+    # Unmasked, the empty plateau is carved into the regions (index tie-breaking).
+    assert segment_volume(volume, min_persistence=0.05).labels.min() == 1
+
+
+def test_each_mask_component_gets_a_region_and_counts_are_foreground_regions():
+    volume = _two_blobs()
+    with pytest.warns(UserWarning, match="2 connected components"):
+        result = segment_volume(volume, mask="nonzero", n_regions=1)
+    assert result.n_regions == 2 and result.hierarchy.n_components == 2
+    assert segment_volume(volume, mask="nonzero", n_regions=4).n_regions == 4
+
+
+def test_mask_rules():
+    from volseg.masks import foreground_mask
+
+    volume = np.arange(64, dtype=float).reshape(4, 4, 4)
+    assert foreground_mask(volume, "value>=60").voxels == 4
+    assert foreground_mask(volume, "value < 3").voxels == 3
+    assert foreground_mask(volume, "none").mask is None
+    assert foreground_mask(volume, "auto").used == "none"  # no plateau
+    assert foreground_mask(volume, "otsu").used.startswith("value>")
+    with pytest.raises(ValueError, match="unknown `mask` rule 'bright'"):
+        foreground_mask(volume, "bright")
+    with pytest.raises(ValueError, match="selects no voxel"):
+        foreground_mask(volume, "value>100")
+    with pytest.raises(ValueError, match="boolean array of the volume's shape"):
+        foreground_mask(volume, np.ones((4, 4), bool))
+
+
+def test_smooth_zero_is_bit_identical_and_smoothing_removes_the_checkerboard():
+    data = _synthetic_volume(32)
+    plain = segment_volume(data)
+    np.testing.assert_array_equal(segment_volume(data, smooth=0).curvature, plain.curvature)
+    smoothed = segment_volume(data, smooth=1.0)
+
+    def total_variation(h):
+        return sum(np.abs(np.diff(h, axis=a)).sum() for a in range(3)) / np.abs(h).sum()
+
+    # 8-bit steps make the curvature flicker from voxel to voxel; sigma 1 calms it.
+    assert total_variation(smoothed.curvature) < 0.5 * total_variation(plain.curvature)
+    with pytest.raises(ValueError, match="`smooth` must be a non-negative number"):
+        segment_volume(data, smooth=-1)
+
+
+def test_regions_auto_picks_the_largest_gap_in_the_papers_range():
+    result = segment_volume(_synthetic_volume(32), n_regions="auto")
+    assert 20 <= result.n_regions <= 40 and result.cut["auto"]
+    p = np.sort(result.hierarchy.event_persistence)[::-1]
+    gaps = {k: np.log(p[k - 2]) - np.log(p[k - 1]) for k in range(20, 41)}
+    assert result.n_regions == max(gaps, key=gaps.get)

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["volume_array", "spacing"]
+__all__ = ["volume_array", "spacing", "smooth"]
 
 # Cut parameters (n_regions, min_persistence) are checked by volseg.morse.check_cut,
 # which owns them: the Morse stage stands alone.
@@ -37,3 +37,14 @@ def spacing(value, default=(1.0, 1.0, 1.0)) -> tuple:
         raise ValueError(f"`spacing` must be three positive numbers (dx, dy, dz), got {value!r}")
     return tuple(float(s) for s in array)
 
+
+
+def smooth(value) -> float:
+    """A Gaussian pre-smoothing sigma in voxels: a non-negative finite number."""
+    try:
+        sigma = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"`smooth` must be a number of voxels, got {value!r}") from None
+    if not (np.isfinite(sigma) and sigma >= 0):
+        raise ValueError(f"`smooth` must be a non-negative number of voxels, got {value!r}")
+    return sigma

@@ -40,8 +40,22 @@ def _get_parser() -> argparse.ArgumentParser:
     seg.add_argument("-o", "--out-dir", default=".", help="output folder (default: .)")
     seg.add_argument("--operator", choices=OPERATOR_CHOICES, default="weighted")
     cut = seg.add_mutually_exclusive_group()
-    cut.add_argument("--regions", type=int, metavar="K", help="number of regions (default 30)")
+    cut.add_argument("--regions", type=_regions, metavar="K",
+                     help="number of regions (default 30; with a mask, foreground regions), or "
+                     "'auto': the count in 20-40 at the largest persistence gap")
     cut.add_argument("--min-persistence", type=float, metavar="T", help="persistence threshold")
+    masking = seg.add_mutually_exclusive_group()
+    masking.add_argument("--mask", default="auto", metavar="RULE",
+                         help="voxels to segment: auto (default: the minimum plateau is "
+                         "masked out when it covers more than half the volume), none, "
+                         "nonzero, otsu, or 'value>T' (also >=, <, <=)")
+    masking.add_argument("--mask-threshold", type=float, metavar="T",
+                         help="segment the voxels with value > T (same as --mask 'value>T')")
+    seg.add_argument("--smooth", type=float, default=0.0, metavar="SIGMA",
+                     help="Gaussian pre-smoothing of the values, sigma in voxels (default 0: "
+                     "none); 1 tames the checkerboard of 8-bit data")
+    seg.add_argument("--plot-persistence", action="store_true",
+                     help="also write <name>_persistence.png, the persistence curve alone")
     seg.add_argument("--shape", type=int, nargs=3, metavar=("X", "Y", "Z"))
     seg.add_argument("--dtype", help="voxel type of raw input (uint8, uint16, float32, ...)")
     seg.add_argument("--value-scale", type=float, metavar="S",
@@ -78,6 +92,15 @@ def _get_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _regions(text):
+    if text == "auto":
+        return text
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of regions or 'auto', got {text!r}") from None
+
+
 def _progress(quiet):
     def say(message):
         if not quiet:
@@ -104,7 +127,7 @@ def _check_out_dir(out_dir: Path):
         raise UsageError(f"{out_dir}: the output folder is not writable")
 
 
-def _output_sets(volumes, out_dir, *, force, wait):
+def _output_sets(volumes, out_dir, *, force, wait, persistence_plot=False):
     """One locked, checked `OutputSet` per volume; two inputs with one stem are refused
     before anything is computed."""
     from .io import OutputSet
@@ -117,13 +140,13 @@ def _output_sets(volumes, out_dir, *, force, wait):
                 f"{seen[volume.name]} and {volume.path or volume.name} would both write "
                 f"{out_dir / volume.name}_*; segment them into different folders")
         seen[volume.name] = volume.path or volume.name
-    return [OutputSet(out_dir, v.name, output_names(v.name), force=force, wait=wait)
-            for v in volumes]
+    return [OutputSet(out_dir, v.name, output_names(v.name, persistence_plot), force=force,
+                      wait=wait) for v in volumes]
 
 
 def segment_to_files(volume, outputs, *, operator="weighted", n_regions=None,
-                     min_persistence=None, value_scale=None, noise=None, seed=0,
-                     say=lambda message: None) -> dict:
+                     min_persistence=None, value_scale=None, noise=None, seed=0, mask=None,
+                     smooth=0.0, say=lambda message: None) -> dict:
     """Segment `volume` and write its output set (an entered `OutputSet`); returns the summary."""
     from .noise import add_value_noise
     from .outputs import files_sha256, summary, write_segmentation
@@ -137,14 +160,19 @@ def segment_to_files(volume, outputs, *, operator="weighted", n_regions=None,
     say(f"{name}: curvature ({operator}) and Morse complex of a {'x'.join(map(str, data.shape))} volume")
     result = segment_volume(data, operator=operator, n_regions=n_regions,
                             min_persistence=min_persistence, value_scale=value_scale,
-                            spacing=volume.spacing)
+                            spacing=volume.spacing, mask=mask, smooth=smooth)
     info = summary(result, name=name, source=volume.path, checksum=files_sha256(volume.files),
                    files=volume.files, frame=volume.frame, noise=noise, seed=seed,
                    requested_regions=n_regions)
-    say(f"{name}: {result.n_regions} regions from {len(result.hierarchy.maxima)} maxima; writing")
+    masked = "" if result.mask.mask is None else f" in a {result.mask.used} mask of {result.mask.voxels} voxels"
+    say(f"{name}: {result.n_regions} regions{masked} from {len(result.hierarchy.maxima)} maxima; writing")
     info["timings_s"]["total"] = round(time.perf_counter() - started, 4)
-    return write_segmentation(outputs, result, data, info, frame=volume.frame,
-                              title=f"{name}: {result.n_regions} regions, {result.operator} curvature")
+    title = f"{name}: {result.n_regions} regions, {result.operator.replace('_', '-')} curvature"
+    if result.smooth:
+        title += f", smoothed sigma {result.smooth:g}"
+    if result.mask.mask is not None:
+        title += f", mask {result.mask.used}"
+    return write_segmentation(outputs, result, data, info, frame=volume.frame, title=title)
 
 
 def _synthetic_volume(n=48):
@@ -166,7 +194,8 @@ def _tagged(say, tag):
 
 def _segment_all(volumes, out_dir, args, say, **options):
     """Lock and check every output set, then segment and write each volume."""
-    sets = _output_sets(volumes, out_dir, force=args.force, wait=getattr(args, "wait", False))
+    sets = _output_sets(volumes, out_dir, force=args.force, wait=getattr(args, "wait", False),
+                        persistence_plot=getattr(args, "plot_persistence", False))
     summaries = []
     with ExitStack() as stack:
         for outputs in sets:
@@ -184,7 +213,7 @@ def _segment_all(volumes, out_dir, args, say, **options):
 def _cmd_segment(args):
     say = _progress(args.quiet)
     out_dir = Path(args.out_dir)
-    if args.regions is not None and args.regions < 1:
+    if isinstance(args.regions, int) and args.regions < 1:
         raise UsageError(f"--regions must be at least 1, got {args.regions}")
     if args.min_persistence is not None and not args.min_persistence >= 0:
         raise UsageError(f"--min-persistence must be a non-negative number, got {args.min_persistence}")
@@ -192,10 +221,12 @@ def _cmd_segment(args):
     volumes = [_load(name, args.shape, args.dtype, args.allow_external_data)
                for name in args.inputs]
     _check_out_dir(out_dir)
+    mask = args.mask if args.mask_threshold is None else f"value>{args.mask_threshold!r}"
     summaries = _segment_all(
         volumes, out_dir, args, say, operator=args.operator.replace("-", "_"),
         n_regions=args.regions, min_persistence=args.min_persistence,
-        value_scale=args.value_scale, noise=args.noise, seed=args.seed)
+        value_scale=args.value_scale, noise=args.noise, seed=args.seed, mask=mask,
+        smooth=args.smooth)
     if args.json:
         print(_json.dumps(summaries if len(summaries) > 1 else summaries[0], indent=2))
     return 0
@@ -215,7 +246,7 @@ def _cmd_demo(args):
     out_dir = Path(args.out_dir)
     _check_out_dir(out_dir)
     volume = Volume(_synthetic_volume(), name="demo", source="built-in synthetic")
-    summary, = _segment_all([volume], out_dir, args, _progress(args.quiet))
+    summary, = _segment_all([volume], out_dir, args, _progress(args.quiet), mask="auto")
     print(f"segmented a built-in {'x'.join(map(str, volume.shape))} volume into "
           f"{summary['n_regions']} regions; wrote:")
     for path in summary["outputs"].values():

@@ -196,7 +196,128 @@ def _saddle_order(flat, saddle):
     return order
 
 
-def descending_complex(field: ArrayLike, *, adjacency=None, connectivity="kuhn") -> "MorseHierarchy":
+@dataclass
+class _Neighbourhood:
+    """The graph the compiled passes walk, in one index space ("node" ids).
+
+    On a grid, nodes are flat indices into the field padded by one layer of -inf
+    (so no neighbour test needs a bounds check, and -inf is never higher than a
+    vertex); voxels outside a mask hold -inf too, which removes their edges. On a
+    graph, nodes are vertex indices and neighbours come from CSR arrays.
+
+    values : flat float64 values per node; vertices : the nodes that take part
+    (in increasing order, so ties break by field index in both spaces); offsets :
+    flat neighbour offsets (grid) or empty; indptr, indices : CSR (graph) or dummies;
+    to_field : node -> flat field index, for results.
+    """
+
+    values: NDArray[np.float64]
+    vertices: NDArray
+    grid: bool
+    offsets: NDArray[np.int64]
+    indptr: NDArray[np.int64]
+    indices: NDArray[np.int64]
+    padded_shape: tuple | None
+
+    def to_field(self, nodes, shape) -> NDArray[np.int64]:
+        if not self.grid:
+            return np.asarray(nodes, dtype=np.int64)
+        coords = np.unravel_index(nodes, self.padded_shape)
+        return np.ravel_multi_index(tuple(c - 1 for c in coords), shape)
+
+
+def _validate_field(field, mask, adjacency) -> tuple:
+    """(float64 values, bool mask or None), checked."""
+    field = np.asarray(field)
+    if field.dtype.kind not in "biuf":
+        raise ValueError(f"`field` must hold real numbers, got dtype {field.dtype}")
+    if field.size == 0:
+        raise ValueError("`field` is empty")
+    values = field.astype(np.float64, copy=False)
+    if mask is not None:
+        mask = np.asarray(mask)
+        if mask.dtype != bool or mask.shape != field.shape:
+            raise ValueError(f"`mask` must be a boolean array of the field's shape {field.shape}, "
+                             f"got {mask.dtype} {mask.shape}")
+        if not mask.any():
+            raise ValueError("`mask` selects no vertex")
+    finite = np.isfinite(values) if mask is None else np.isfinite(values) | ~mask
+    if not finite.all():
+        bad = np.argwhere(~finite)[0].tolist()
+        raise ValueError(f"`field` holds {int((~finite).sum())} NaN or infinite values "
+                         f"(first at index {bad})")
+    if adjacency is not None and field.ndim != 1:
+        raise ValueError(f"with `adjacency`, `field` must be 1-D (one value per vertex), "
+                         f"got shape {field.shape}")
+    if adjacency is None and field.ndim > 3:
+        raise ValueError(f"grid fields must be 1-D, 2-D or 3-D, got shape {field.shape}")
+    return values, mask
+
+
+def _neighbourhood(values, mask, adjacency, connectivity) -> _Neighbourhood:
+    empty = np.zeros(0, dtype=np.int64)
+    if adjacency is not None:
+        indptr, indices = _csr_adjacency(adjacency, values.size)
+        if mask is not None:  # drop every edge with an end outside the mask
+            values = np.where(mask, values, -np.inf)
+        vertices = np.arange(values.size, dtype=np.int64) if mask is None else np.flatnonzero(mask)
+        return _Neighbourhood(values, vertices, False, empty, indptr, indices, None)
+    steps = grid_offsets(values.ndim, connectivity)
+    padded = np.pad(values if mask is None else np.where(mask, values, -np.inf), 1,
+                    constant_values=-np.inf)
+    strides = np.array([s // padded.itemsize for s in padded.strides], dtype=np.int64)
+    index_type = np.int32 if padded.size < 2**31 - 1 else np.int64
+    node = np.zeros((1,) * values.ndim, dtype=index_type)
+    for axis, (size, stride) in enumerate(zip(values.shape, strides, strict=True)):
+        step = ((np.arange(size) + 1) * stride).astype(index_type)
+        node = node + step.reshape([-1 if a == axis else 1 for a in range(values.ndim)])
+    vertices = node.ravel() if mask is None else node[mask]
+    dummy = np.zeros(1, dtype=np.int64)
+    return _Neighbourhood(padded.ravel(), vertices, True, (steps @ strides).astype(np.int64),
+                          dummy, dummy, padded.shape)
+
+
+def _descending_cells(kernels, graph: _Neighbourhood):
+    """(cell per node, -1 off the vertices; maxima nodes by decreasing value): cell[v] is
+    the id of the maximum v's steepest ascent reaches."""
+    index_type = np.int32 if len(graph.values) < 2**31 - 1 else np.int64
+    up = np.empty(len(graph.values), dtype=index_type)
+    kernels.steepest_ascent(graph.values, graph.vertices, graph.grid, graph.offsets,
+                            graph.indptr, graph.indices, up)
+    cell = np.full(len(graph.values), -1, dtype=index_type)
+    kernels.resolve_cells(graph.vertices, up, cell)
+    maxima = graph.vertices[up[graph.vertices] == graph.vertices]
+    # Maximum ids by decreasing value (simulation of simplicity: then by index).
+    maxima = maxima[np.lexsort((maxima, graph.values[maxima]))[::-1]]
+    up[maxima] = np.arange(len(maxima), dtype=index_type)  # up is free now: root -> id
+    kernels.relabel(graph.vertices, cell, up)
+    return cell, maxima
+
+
+@dataclass
+class _MergeEvents:
+    """Elder-rule merges, in sweep order: `young` dies into `elder`'s component at the
+    saddle node `saddle`; `target` is the cell across the saddle edge."""
+
+    young: NDArray[np.int32]
+    elder: NDArray[np.int32]
+    target: NDArray[np.int32]
+    saddle: NDArray[np.int64]
+
+
+def _merge_events(kernels, graph: _Neighbourhood, cell, n_maxima) -> _MergeEvents:
+    """Cross-cell edges gathered in memory order (parallel, cache-friendly) with a
+    per-pair dedup, then one Kruskal over them by decreasing saddle (value, index)."""
+    edge_a, edge_b, edge_v = _cross_edges(kernels, graph.values, graph.vertices, graph.grid,
+                                          graph.offsets, graph.indptr, graph.indices, cell)
+    order = _saddle_order(graph.values, edge_v)
+    out = [np.empty(max(n_maxima - 1, 0), dtype=t) for t in (np.int32, np.int32, np.int32, np.int64)]
+    n_events = kernels.kruskal(order, edge_a, edge_b, edge_v, n_maxima, *out)
+    return _MergeEvents(*(a[:n_events].copy() for a in out))
+
+
+def descending_complex(field: ArrayLike, *, adjacency=None, connectivity="kuhn",
+                       mask=None) -> "MorseHierarchy":
     """Descending Morse complex of `field` and its persistence hierarchy.
 
     Parameters
@@ -205,10 +326,18 @@ def descending_complex(field: ArrayLike, *, adjacency=None, connectivity="kuhn")
         On a grid: an N-d array (1-D, 2-D or 3-D), neighbours by `connectivity`.
         On a graph: a 1-D array, one value per vertex, with `adjacency`.
     adjacency : scipy sparse matrix, (E, 2) int array or networkx graph, optional
-        Vertex adjacency (symmetrised; self-loops ignored). For a networkx graph,
-        ``field[i]`` is the value of the i-th node of ``list(graph.nodes)``.
+        Vertex adjacency (symmetrised; self-loops ignored). Structure, not weight:
+        any stored nonzero of a sparse matrix is an edge, whatever its value or
+        sign. For a networkx graph, ``field[i]`` is the value of the i-th node of
+        ``list(graph.nodes)``.
     connectivity : {'kuhn', 4, 8, 6, 18, 26, 2}
         Grid neighbourhood (see `grid_offsets`); ignored with `adjacency`.
+    mask : bool ndarray of the field's shape, optional
+        The vertices that take part (DESIGN.md section 9): the graph is restricted
+        to them (an edge only between two masked vertices), so maxima, cells,
+        saddles and persistence are those of the foreground, exactly as with the
+        explicit restricted adjacency; values outside the mask are ignored (they may
+        be NaN). Cuts label unmasked vertices 0 and regions 1..k.
 
     Returns
     -------
@@ -217,96 +346,38 @@ def descending_complex(field: ArrayLike, *, adjacency=None, connectivity="kuhn")
     Raises
     ------
     ValueError
-        NaN or infinite values, a non-numeric field, adjacency of the wrong size or
-        with out-of-range vertices, an unknown connectivity.
+        NaN or infinite values (inside the mask), a non-numeric field, adjacency of
+        the wrong size or with out-of-range vertices, an unknown connectivity, a
+        mask of the wrong shape or type, or one that selects nothing.
     """
     from . import _morse_kernels as kernels
 
-    field = np.asarray(field)
-    if field.dtype.kind not in "biuf":
-        raise ValueError(f"`field` must hold real numbers, got dtype {field.dtype}")
-    if field.size == 0:
-        raise ValueError("`field` is empty")
-    values = field.astype(np.float64, copy=False)
-    if not np.isfinite(values).all():
-        bad = np.argwhere(~np.isfinite(values))[0].tolist()
-        raise ValueError(
-            f"`field` holds {int((~np.isfinite(values)).sum())} NaN or infinite values "
-            f"(first at index {bad})"
-        )
-    if adjacency is not None:
-        if field.ndim != 1:
-            raise ValueError(f"with `adjacency`, `field` must be 1-D (one value per vertex), got shape {field.shape}")
-        indptr, indices = _csr_adjacency(adjacency, field.size)
-        flat = values
-        offsets = np.zeros(0, dtype=np.int64)
-        grid = False
-        shape = field.shape
-    else:
-        shape = field.shape
-        if field.ndim > 3:
-            raise ValueError(f"grid fields must be 1-D, 2-D or 3-D, got shape {shape}")
-        steps = grid_offsets(field.ndim, connectivity)
-        padded = np.pad(values, 1, constant_values=-np.inf)
-        strides = np.array([s // padded.itemsize for s in padded.strides], dtype=np.int64)
-        offsets = (steps @ strides).astype(np.int64)
-        flat = padded.ravel()
-        indptr = indices = np.zeros(1, dtype=np.int64)
-        grid = True
-    if grid:
-        index_type = np.int32 if padded.size < 2**31 - 1 else np.int64
-        real = np.zeros((1,) * field.ndim, dtype=index_type)
-        for axis, (size, stride) in enumerate(zip(shape, strides, strict=True)):
-            step = ((np.arange(size) + 1) * stride).astype(index_type)
-            real = real + step.reshape([-1 if a == axis else 1 for a in range(field.ndim)])
-        real = real.ravel()
-    else:
-        real = np.arange(field.size, dtype=np.int64)
-    index_type = np.int32 if len(flat) < 2**31 - 1 else np.int64
-    up = np.empty(len(flat), dtype=index_type)
-    kernels.steepest_ascent(flat, real, grid, offsets, indptr, indices, up)
-    cell = np.empty(len(flat), dtype=index_type)
-    kernels.resolve_cells(real, up, cell)
-    maxima = real[up[real] == real]
-    # Maximum ids by decreasing value (simulation of simplicity: then by index).
-    maxima = maxima[np.lexsort((maxima, flat[maxima]))[::-1]]
-    up[maxima] = np.arange(len(maxima), dtype=index_type)  # up is free now: root -> id
-    kernels.relabel(real, cell, up)
-    del up
-    # Cross-cell edges, gathered in memory order (parallel, cache-friendly) with a
-    # per-pair dedup, then one Kruskal over them by decreasing saddle (value, index).
-    edge_a, edge_b, edge_v = _cross_edges(kernels, flat, real, grid, offsets, indptr,
-                                          indices, cell)
-    del real
-    order = _saddle_order(flat, edge_v)
-    n_max = len(maxima)
-    ev = [np.empty(max(n_max - 1, 0), dtype=t) for t in (np.int32, np.int32, np.int32, np.int64)]
-    n_ev = kernels.kruskal(order, edge_a, edge_b, edge_v, n_max, *ev)
-    del order, edge_a, edge_b, edge_v
-    if grid:
-        cells = cell.reshape(padded.shape)[(slice(1, -1),) * field.ndim].astype(np.int32)
-        # padded flat index -> field flat index
-        maxima = np.ravel_multi_index(
-            tuple(c - 1 for c in np.unravel_index(maxima, padded.shape)), shape)
-        saddles = np.ravel_multi_index(
-            tuple(c - 1 for c in np.unravel_index(ev[3][:n_ev], padded.shape)), shape)
+    values, mask = _validate_field(field, mask, adjacency)
+    graph = _neighbourhood(values, mask, adjacency, connectivity)
+    cell, maxima = _descending_cells(kernels, graph)
+    events = _merge_events(kernels, graph, cell, len(maxima))
+    shape = values.shape
+    if graph.grid:
+        cells = cell.reshape(graph.padded_shape)[(slice(1, -1),) * values.ndim].astype(np.int32)
     else:
         cells = cell.astype(np.int32, copy=False)
-        saddles = ev[3][:n_ev]
     del cell
+    maxima = graph.to_field(maxima, shape)
+    saddles = graph.to_field(events.saddle, shape)
     return MorseHierarchy(
         shape=shape,
         cells=cells,
         maxima=maxima,
         values=values.ravel()[maxima],
-        young=ev[0][:n_ev].copy(),
-        elder=ev[1][:n_ev].copy(),
-        target=ev[2][:n_ev].copy(),
+        young=events.young,
+        elder=events.elder,
+        target=events.target,
         saddle=saddles,
         saddle_value=values.ravel()[saddles],
+        mask=mask,
         _field=values,
-        _adjacency=(indptr, indices) if not grid else None,
-        _connectivity=connectivity if grid else None,
+        _adjacency=None if graph.grid else (graph.indptr, graph.indices),
+        _connectivity=connectivity if graph.grid else None,
     )
 
 
@@ -332,6 +403,9 @@ class MorseHierarchy:
         Flat vertex index of each event's saddle (the lower end of the highest edge
         crossing between the two components).
     saddle_value : (E,) ndarray of float
+    mask : bool ndarray of `shape`, or None
+        The vertices that took part; cuts label the others 0 and regions 1..k.
+        Without a mask, regions are 0..k-1.
     """
 
     shape: tuple
@@ -343,6 +417,7 @@ class MorseHierarchy:
     target: NDArray[np.int32]
     saddle: NDArray[np.int64]
     saddle_value: NDArray[np.float64]
+    mask: NDArray[np.bool_] | None
     _field: NDArray[np.float64]
     _adjacency: tuple | None = None
     _connectivity: object = None
@@ -378,6 +453,30 @@ class MorseHierarchy:
         if keep >= len(p):
             return 0.0
         return 0.5 * float(p[keep - 1] + p[keep])
+
+    def regions_at(self, thresholds) -> NDArray[np.int64]:
+        """Region count of the cut at each persistence threshold (the persistence curve)."""
+        p = np.sort(self.event_persistence)
+        return self.n_components + len(p) - np.searchsorted(p, np.asarray(thresholds), side="left")
+
+    def largest_gap(self, region_range=(20, 40)) -> int:
+        """The region count k in `region_range` (inclusive) whose cut sits in the widest
+        gap between consecutive persistences, on a log scale: the most clearly
+        separated simplification. Falls back to the range's ends when the hierarchy
+        has fewer maxima."""
+        lo, hi = (int(r) for r in region_range)
+        p = np.sort(self.event_persistence)[::-1]
+        best, best_gap = None, -np.inf
+        for k in range(max(lo, self.n_components), hi + 1):
+            keep = k - self.n_components
+            if keep < 1 or keep >= len(p):
+                continue
+            gap = np.log(p[keep - 1]) - np.log(p[keep]) if p[keep] > 0 else np.inf
+            if gap > best_gap:
+                best, best_gap = k, gap
+        if best is None:
+            return max(min(hi, len(self.maxima)), 1)
+        return best
 
     def _merged_events(self, min_persistence, n_regions):
         p = self.event_persistence
@@ -432,9 +531,15 @@ class MorseHierarchy:
         Returns
         -------
         ndarray of int32, `shape`
-            Consecutive labels 0..k-1, ordered by decreasing maximum value.
+            Consecutive labels 0..k-1, ordered by decreasing maximum value; with a
+            mask, 0 outside it and regions 1..k.
         """
-        return self.region_of_maximum(min_persistence, n_regions)[self.cells]
+        region = self.region_of_maximum(min_persistence, n_regions)
+        if self.mask is None:
+            return region[self.cells]
+        # cells are -1 outside the mask: the table's last entry, 0, labels them.
+        table = np.concatenate([region + 1, np.zeros(1, dtype=region.dtype)])
+        return table[self.cells]
 
     def region_adjacency(self, labels=None, **cut):
         """The regions of a cut as a networkx graph.
@@ -442,7 +547,8 @@ class MorseHierarchy:
         Nodes are region labels with ``size``, ``maximum`` (flat vertex index) and
         ``value``; edges join adjacent regions with ``saddle`` (the highest value
         min(f(u), f(v)) over edges (u, v) crossing between them). `labels`
-        defaults to ``segment(**cut)``.
+        defaults to ``segment(**cut)``. With a mask, label 0 (outside it) is not
+        a region: it has no node and no edges.
         """
         import networkx as nx
 
@@ -475,6 +581,10 @@ class MorseHierarchy:
             saddles.append(np.minimum(f[u[cross]], f[indices[cross]]))
         pairs = np.concatenate(pairs) if pairs else np.zeros((0, 2), int)
         saddles = np.concatenate(saddles) if saddles else np.zeros(0)
+        first = 0
+        if self.mask is not None:  # label 0 is outside the mask: no edges, no node
+            inside = pairs[:, 0] > 0
+            pairs, saddles, first = pairs[inside], saddles[inside], 1
         graph = nx.Graph()
         flat_labels = labels.ravel()
         flat_field = f.ravel()
@@ -483,7 +593,7 @@ class MorseHierarchy:
         order = np.lexsort((np.arange(flat_field.size), flat_field))
         top = np.full(len(sizes), -1)
         top[flat_labels[order]] = order
-        for region in range(len(sizes)):
+        for region in range(first, len(sizes)):
             graph.add_node(region, size=int(sizes[region]), maximum=int(top[region]),
                            value=float(flat_field[top[region]]))
         if len(pairs):

@@ -25,9 +25,17 @@ OUTPUT_SUFFIXES = {"labels": "_labels.nii.gz", "curvature": "_curvature.nii.gz",
                    "summary": "_summary.json", "preview": "_preview.png"}
 
 
-def output_names(stem: str) -> dict:
-    """Kind -> file name of the outputs of `stem`."""
-    return {kind: stem + suffix for kind, suffix in OUTPUT_SUFFIXES.items()}
+def output_names(stem: str, persistence_plot: bool = False) -> dict:
+    """Kind -> file name of the outputs of `stem` (with ``<stem>_persistence.png``
+    when `persistence_plot`)."""
+    names = {kind: stem + suffix for kind, suffix in OUTPUT_SUFFIXES.items()}
+    if persistence_plot:
+        names["persistence"] = f"{stem}_persistence.png"
+    return names
+
+
+#: How many of the largest persistences the summary lists.
+LISTED_PERSISTENCES = 200
 
 
 def files_sha256(paths) -> str | None:
@@ -60,10 +68,22 @@ def summary(result, *, name, source=None, checksum=None, files=(), frame: Frame 
         "value_scale": result.value_scale,
         "noise_percent": noise or 0.0,
         "seed": seed if noise else None,
+        "smooth_sigma_voxels": result.smooth,
+        "mask": result.mask.describe(),
+        "labels": "0 outside the mask, regions 1..k",
         "n_regions": result.n_regions,
         "requested_regions": requested_regions,
+        "cut": "auto: the largest persistence gap for 20-40 regions" if result.cut.get("auto")
+        else ("persistence threshold" if result.cut.get("min_persistence") is not None
+              else "region count"),
         "min_persistence": result.min_persistence,
         "n_maxima": int(len(result.hierarchy.maxima)),
+        "persistence": {
+            "components": result.hierarchy.n_components,
+            "events": int(len(result.hierarchy.young)),
+            f"largest_{LISTED_PERSISTENCES}": np.sort(
+                result.hierarchy.event_persistence)[::-1][:LISTED_PERSISTENCES].tolist(),
+        },
         "regions": regions,
         "timings_s": {k: round(v, 4) for k, v in result.timings.items()},
     }
@@ -77,11 +97,13 @@ def write_segmentation(outputs: OutputSet, result, values, info: dict, *, frame:
     `values` is the volume that was segmented (for the preview), `info` the summary
     (its ``outputs`` entry is filled in here). Returns the summary.
     """
-    from .preview import write_preview
+    from .preview import write_persistence_plot, write_preview
 
     frame = frame or Frame.from_spacing(result.spacing)
     info = {**info, "outputs": {kind: str(path) for kind, path in outputs.targets.items()}}
     label_type = np.min_scalar_type(max(int(result.labels.max()), 0))
+    hierarchy = result.hierarchy
+    curve = (hierarchy.event_persistence, hierarchy.n_components, result.min_persistence)
 
     def write(paths):
         # Labels in the smallest unsigned type that holds them (what label viewers
@@ -93,8 +115,11 @@ def write_segmentation(outputs: OutputSet, result, values, info: dict, *, frame:
                 pool.submit(write_volume, paths["curvature"],
                             result.curvature.astype(np.float32), frame=frame),
                 pool.submit(write_preview, paths["preview"], values, result.curvature,
-                            result.labels, title=title),
+                            result.labels, title=title, persistence=curve),
             ]
+            if "persistence" in paths:
+                jobs.append(pool.submit(write_persistence_plot, paths["persistence"], *curve,
+                                        result.n_regions))
             for job in jobs:
                 job.result()
         Path(paths["summary"]).write_text(_json.dumps(info, indent=2))

@@ -53,10 +53,99 @@ def diverging(values, limit):
 
 
 def overlay(values, labels, lo, hi):
-    """Region colours blended over the gray volume."""
+    """Region colours (label i gets tab20 colour i - 1) blended over the gray volume;
+    label 0 (outside the mask) is left gray."""
+    labels = np.asarray(labels)
     base = gray(values, lo, hi).astype(np.float64)
-    colours = TAB20[np.asarray(labels) % len(TAB20)]
-    return np.round((1 - _OVERLAY_ALPHA) * base + _OVERLAY_ALPHA * colours).astype(np.uint8)
+    colours = TAB20[(labels - 1) % len(TAB20)]
+    blended = (1 - _OVERLAY_ALPHA) * base + _OVERLAY_ALPHA * colours
+    return np.round(np.where((labels > 0)[..., None], blended, base)).astype(np.uint8)
+
+
+def _log_ticks(lo, hi):
+    return [10.0**e for e in range(int(np.floor(np.log10(lo))), int(np.ceil(np.log10(hi))) + 1)]
+
+
+def persistence_panel(persistence, n_components, threshold, n_regions, *, width=_BOX * 3 + 2 * _GAP,
+                      height=190):
+    """An RGB image of the persistence curve: regions of the cut against the threshold
+    (log x, log y), the chosen cut marked. Read it to choose `--min-persistence`:
+    a long flat step is a threshold range over which the segmentation is stable.
+
+    Parameters
+    ----------
+    persistence : (E,) array of float
+        Persistence of every merge event (`MorseHierarchy.event_persistence`).
+    n_components : int
+        Regions that never merge (one per connected component of the graph).
+    threshold : float
+        The chosen threshold; `n_regions` its region count.
+    """
+    from PIL import Image, ImageDraw
+
+    p = np.sort(np.asarray(persistence, dtype=float))[::-1]
+    p = p[p > 0]
+    canvas = Image.new("RGB", (width, height), _BACKGROUND)
+    draw = ImageDraw.Draw(canvas)
+    small, medium = _font(11), _font(13)
+    left, right, top, bottom = 62, 18, 24, 40
+    draw.text((width // 2, 4), "persistence curve: regions of the cut at each threshold "
+              "(choose --min-persistence in a long flat step)", fill=_INK, font=medium, anchor="ma")
+    if len(p) == 0:
+        draw.text((width // 2, height // 2), "no merge events: a single maximum per component",
+                  fill=_INK, font=small, anchor="mm")
+        return np.asarray(canvas)
+    # Four decades below the largest persistence: smaller events (near-ties) all sit
+    # at the left edge, where the curve starts at the count of every maximum.
+    x_lo, x_hi = max(p[-1], p[0] * 1e-4) / 1.5, p[0] * 1.5
+    y_hi = n_components + len(p)
+
+    def x_of(t):
+        return left + (np.log10(t) - np.log10(x_lo)) / (np.log10(x_hi) - np.log10(x_lo)) * (
+            width - left - right)
+
+    def y_of(r):
+        return height - bottom - np.log10(r) / max(np.log10(y_hi), 1e-9) * (height - top - bottom)
+
+    draw.rectangle([left, top, width - right, height - bottom], outline=_INK)
+    for t in _log_ticks(x_lo, x_hi):
+        if x_lo <= t <= x_hi:
+            x = x_of(t)
+            draw.line([x, height - bottom, x, height - bottom + 4], fill=_INK)
+            draw.text((x, height - bottom + 6), f"{t:g}", fill=_INK, font=small, anchor="ma")
+    for r in [1, 10, 100, 1000, 10000, 100000, 1000000]:
+        if r <= y_hi:
+            y = y_of(r)
+            draw.line([left - 4, y, left, y], fill=_INK)
+            draw.text((left - 6, y), str(r), fill=_INK, font=small, anchor="rm")
+    draw.text((width // 2, height - 14), "persistence threshold (log)", fill=_INK, font=small,
+              anchor="ma")
+    draw.text((6, top - 12), "regions (log)", fill=_INK, font=small)
+    # Regions at threshold t: n_components + #{p >= t}, a staircase falling at each p.
+    points = [(x_of(x_lo), y_of(y_hi))]
+    for i, value in enumerate(p[::-1]):
+        count = y_hi - i
+        x = x_of(max(value, x_lo))
+        points += [(x, y_of(count)), (x, y_of(count - 1))]
+    points.append((x_of(x_hi), y_of(max(n_components, 1))))
+    draw.line(points, fill=(31, 119, 180), width=2)
+    if threshold > 0 and x_lo < threshold < x_hi:
+        x = x_of(threshold)
+        draw.line([x, top, x, height - bottom], fill=(214, 39, 40), width=1)
+        right_side = x < width * 0.7
+        draw.text((x + 4 if right_side else x - 4, top + 2),
+                  f"cut: {n_regions} regions at {threshold:.3g}", fill=(214, 39, 40), font=small,
+                  anchor="la" if right_side else "ra")
+    return np.asarray(canvas)
+
+
+def write_persistence_plot(path, persistence, n_components, threshold, n_regions) -> Path:
+    """The persistence curve alone, as PNG (see `persistence_panel`)."""
+    from PIL import Image
+
+    Image.fromarray(persistence_panel(persistence, n_components, threshold, n_regions)).save(
+        path, format="PNG")
+    return Path(path)
 
 
 def _fit(rgb):
@@ -92,17 +181,20 @@ def _colour_bar(canvas, draw, x, y, width, colours, ticks, label, font):
     draw.text((x + width // 2, y + 34), label, fill=_INK, font=font, anchor="ma")
 
 
-def write_preview(path, volume, curvature, labels, *, title="") -> Path:
-    """Mid slices along x, y, z: the volume, its curvature, the labels over the volume.
+def write_preview(path, volume, curvature, labels, *, title="", persistence=None) -> Path:
+    """Mid slices along x, y, z: the volume, its curvature, the labels over the volume,
+    and (given ``persistence=(event_persistence, n_components, threshold)``) the
+    persistence curve below them.
 
-    Written to `path` as PNG (the caller handles atomic renaming). Region colours
-    cycle through the 20 tab20 colours; the legend names the first ten. The
-    curvature colour scale is +-(99th percentile of |H| over the slices shown).
+    Written to `path` as PNG (the caller handles atomic renaming). Labels are 1..k
+    (0, outside a mask, is left uncoloured); region colours cycle through the 20
+    tab20 colours; the legend names the first ten. The curvature colour scale is
+    +-(99th percentile of |H| over the slices shown).
     """
     from PIL import Image, ImageDraw
 
     volume, curvature, labels = np.asarray(volume), np.asarray(curvature), np.asarray(labels)
-    k = int(labels.max()) + 1 if labels.size else 0
+    k = int(labels.max()) if labels.size else 0
     lo, hi = float(volume.min()), float(volume.max())
     mids = [np.take(curvature, n // 2, axis=a) for a, n in enumerate(curvature.shape)]
     limit = float(np.percentile(np.abs(np.concatenate([m.ravel() for m in mids])), 99)) or 1.0
@@ -119,6 +211,10 @@ def write_preview(path, volume, curvature, labels, *, title="") -> Path:
     heights = [max(image.shape[0] for _, image in panels) for _, _, panels in rows]
     width = _LEFT + 3 * _BOX + 2 * _GAP + 30
     height = _TOP + sum(heights) + 3 * _GAP + 62
+    curve = None
+    if persistence is not None:
+        curve = persistence_panel(*persistence, k)
+        height += curve.shape[0] + 12
     canvas = Image.new("RGB", (width, height), _BACKGROUND)
     draw = ImageDraw.Draw(canvas)
     small, medium, large = _font(11), _font(13), _font(17)
@@ -145,7 +241,7 @@ def write_preview(path, volume, curvature, labels, *, title="") -> Path:
             for i in range(shown):
                 yy = y0 + 24 + 14 * i
                 draw.rectangle([x0, yy, x0 + 12, yy + 10], fill=tuple(int(c) for c in TAB20[i]))
-                draw.text((x0 + 18, yy - 1), f"region {i}", fill=_INK, font=small)
+                draw.text((x0 + 18, yy - 1), f"region {i + 1}", fill=_INK, font=small)
         y0 += heights[row] + _GAP
     bar_y = y0 - 8
     ramp = np.linspace(0, 1, _BOX)
@@ -155,5 +251,7 @@ def write_preview(path, volume, curvature, labels, *, title="") -> Path:
                 diverging(np.linspace(-limit, limit, _BOX), limit),
                 [(0, f"{-limit:.3g}"), (0.5, "0"), (1, f"{limit:.3g}")],
                 "mean curvature (+ peak, - valley)", small)
+    if curve is not None:
+        canvas.paste(Image.fromarray(curve), (_LEFT, bar_y + 62))
     canvas.save(path, format="PNG")
     return Path(path)
