@@ -44,7 +44,8 @@ DEFAULT_DATASETS = ("fuel", "neghip", "silicium")
 DEFAULT_OPERATORS = ("laplace_beltrami", "weighted", "unweighted")
 DEFAULT_LEVELS = (0.0, 0.1, 0.25, 0.5, 1.0, 2.0, 5.0, 10.0)
 DEFAULT_SEEDS = 5
-KEY_COLUMNS = ("dataset", "checksum", "operator", "regions", "cut", "level", "seed")
+KEY_COLUMNS = ("dataset", "checksum", "operator", "regions", "cut", "mask", "level", "seed")
+MASKS = ("none", "auto")
 CUTS = ("threshold", "regions")
 DB_NAME = "results.sqlite"
 
@@ -80,16 +81,21 @@ def _single_threaded(threads):
         pass
 
 
-def clean_reference(volume, operator, regions, threads=1):
-    """Threshold, value scale and labels of the clean segmentation into `regions`."""
+def clean_reference(volume, operator, regions, mask="none", threads=1):
+    """Threshold, value scale, labels and mask of the clean segmentation into `regions`.
+
+    With ``mask="auto"`` the mask is resolved on the clean volume and held for every
+    noisy run (noise would make a value rule select everything): the foreground is
+    a property of the data, not of the draw.
+    """
     from volseg import segment_volume
 
     _single_threaded(threads)
     clean = segment_volume(np.asarray(volume, dtype=np.float64), operator=operator,
-                           n_regions=regions)
+                           n_regions=regions, mask=mask)
     data = np.asarray(volume)
     return {"threshold": clean.min_persistence, "value_scale": clean.value_scale,
-            "n_regions": clean.n_regions, "labels": clean.labels,
+            "n_regions": clean.n_regions, "labels": clean.labels, "mask": clean.mask.mask,
             "value_range": float(data.max()) - float(data.min())}
 
 
@@ -97,10 +103,10 @@ def _failure(err) -> dict:
     return {"error": f"{type(err).__name__}: {' '.join(str(err).split())}"}
 
 
-def clean_reference_safely(volume, operator, regions, threads=1):
+def clean_reference_safely(volume, operator, regions, mask="none", threads=1):
     """`clean_reference`, with a failure returned as ``{"error": ...}`` (see below)."""
     try:
-        return clean_reference(volume, operator, regions, threads)
+        return clean_reference(volume, operator, regions, mask, threads)
     except Exception as err:  # noqa: BLE001 - reported in the rows of its tasks
         return _failure(err)
 
@@ -133,10 +139,11 @@ def run_task(task, volume, reference, threads=1):
     # into the clean region count instead, so only the boundaries can move.
     cut = ({"n_regions": reference["n_regions"]} if task.get("cut") == "regions"
            else {"min_persistence": reference["threshold"]})
+    mask = reference["mask"]
     result = segment_volume(data, operator=task["operator"], value_scale=reference["value_scale"],
-                            **cut)
+                            mask=mask, **cut)
     clean = reference["labels"]
-    scores = compare(clean, result.labels)
+    scores = compare(clean, result.labels, mask=mask)  # a masked run scores its foreground
     # Plateaus (fuel and neghip are about half exact zeros) have zero curvature, so
     # their clean partition is decided by index tie-breaking and any noise redraws
     # it: the similarity over the foreground (clean value above its minimum) shows
@@ -177,11 +184,11 @@ def load_dataset(spec):
     return volume.name, np.asarray(volume), data_fetch.sha256(path)
 
 
-def plan(datasets, operators, levels, seeds, regions, cut="threshold"):
+def plan(datasets, operators, levels, seeds, regions, cut="threshold", mask="none"):
     """All tasks, as dictionaries of the key columns, in a stable order."""
     return [
         {"dataset": name, "checksum": checksum, "operator": operator, "regions": regions,
-         "cut": cut, "level": float(level), "seed": seed}
+         "cut": cut, "mask": mask, "level": float(level), "seed": seed}
         for name, _, checksum in datasets for operator in operators
         for level in levels for seed in range(seeds)
     ]
@@ -232,7 +239,8 @@ class _Progress:
 
 
 def run(datasets, out_dir, *, operators=DEFAULT_OPERATORS, levels=DEFAULT_LEVELS,
-        seeds=DEFAULT_SEEDS, regions=30, cut="threshold", scheduler=None, workers=None,
+        seeds=DEFAULT_SEEDS, regions=30, cut="threshold", mask="none", scheduler=None,
+        workers=None,
         say=lambda message: None) -> dict:
     """Run (or resume) the tasks not yet done; returns counts of what happened.
 
@@ -247,7 +255,9 @@ def run(datasets, out_dir, *, operators=DEFAULT_OPERATORS, levels=DEFAULT_LEVELS
     from volseg.io import FolderLock, OutputError
 
     out_dir = Path(out_dir)
-    tasks = plan(datasets, operators, levels, seeds, regions, cut)
+    if mask not in MASKS:
+        raise UsageError(f"mask must be one of {MASKS}, got {mask!r}")
+    tasks = plan(datasets, operators, levels, seeds, regions, cut, mask)
     out_dir.mkdir(parents=True, exist_ok=True)
     lock = FolderLock(out_dir, "results", busy="another noise-stability run is using it")
     try:
@@ -276,7 +286,7 @@ def run(datasets, out_dir, *, operators=DEFAULT_OPERATORS, levels=DEFAULT_LEVELS
                 pair = (t["dataset"], t["operator"])
                 if pair not in references:
                     references[pair] = client.submit(clean_reference_safely, scattered[pair[0]],
-                                                     pair[1], regions, pure=False)
+                                                     pair[1], regions, mask, pure=False)
             futures = {}
             run_token = uuid.uuid4().hex[:8]  # two runs on one scheduler never share keys
             for t in pending:
@@ -322,15 +332,15 @@ _STYLES = ["-", "--", ":", "-."]
 
 def summarize(rows):
     """Mean, standard deviation, min and max over seeds per (dataset, operator, cut,
-    level)."""
+    mask, level)."""
     groups = {}
     for row in rows:
-        key = (row["dataset"], row["operator"], row["cut"], row["level"])
+        key = (row["dataset"], row["operator"], row["cut"], row["mask"], row["level"])
         groups.setdefault(key, []).append(row)
     out = []
-    for (dataset, operator, cut, level), members in sorted(groups.items()):
-        entry = {"dataset": dataset, "operator": operator, "cut": cut, "level": level,
-                 "seeds": len(members)}
+    for (dataset, operator, cut, mask, level), members in sorted(groups.items()):
+        entry = {"dataset": dataset, "operator": operator, "cut": cut, "mask": mask,
+                 "level": level, "seeds": len(members)}
         for metric in ("similarity", "similarity_foreground", "region_ratio", "n_regions",
                        "seconds"):
             values = np.array([m.get(metric, np.nan) for m in members], dtype=float)
@@ -343,7 +353,8 @@ def summarize(rows):
 def report(out_dir) -> list[Path]:
     """``tasks.csv`` (every row) and ``summary.csv`` in `out_dir`; for the paper's
     threshold cut ``fig5.png`` and ``fig5_foreground.png`` (similarity over the clean
-    foreground), for the region-count cut ``fig5_regions.png``."""
+    foreground), for the region-count cut ``fig5_regions.png``; for runs with
+    ``--mask auto``, ``fig5_masked.png`` (segmented and scored on the foreground)."""
     out_dir = Path(out_dir)
     if not (out_dir / DB_NAME).exists():
         raise UsageError(f"{out_dir / DB_NAME}: no results to report (run first)")
@@ -355,6 +366,11 @@ def report(out_dir) -> list[Path]:
     summary = summarize(rows)
     summary_csv = write_csv(out_dir / "summary.csv", summary)
     paths = [tasks_csv, summary_csv]
+    masked = [s for s in summary if s["mask"] != "none" and s["cut"] == "threshold"]
+    if masked:
+        paths.append(_figure(masked, out_dir / "fig5_masked.png",
+                             title="foreground only (mask auto), threshold held"))
+    summary = [s for s in summary if s["mask"] == "none"]
     held = [s for s in summary if s["cut"] == "threshold"]
     if held:
         paths.append(_figure(held, out_dir / "fig5.png"))
@@ -437,6 +453,9 @@ def _parser():
     p.add_argument("--cut", choices=CUTS, default="threshold",
                    help="threshold: hold the clean threshold (the paper); regions: cut "
                    "each noisy result into the clean region count")
+    p.add_argument("--mask", choices=MASKS, default="none",
+                   help="auto: segment and score only the clean volume's foreground (the "
+                   "minimum plateau masked out when it covers over half the volume)")
     p.add_argument("--workers", type=int, help="LocalCluster workers (default: cores)")
     p.add_argument("--scheduler", metavar="ADDRESS", help="use an existing Dask scheduler")
     p.add_argument("--report", action="store_true", help="then write CSV and the figure")
@@ -468,7 +487,7 @@ def main(argv=None) -> int:
                 raise UsageError(f"two datasets share a name: {names}")
             counts = run(datasets, args.out, operators=operators, levels=args.levels,
                          seeds=args.seeds, regions=args.regions, cut=args.cut,
-                         scheduler=args.scheduler,
+                         mask=args.mask, scheduler=args.scheduler,
                          workers=args.workers, say=say)
             say(f"ran {counts['ran']} tasks ({counts['failed']} failed) in "
                 f"{counts['seconds']:.1f} s; {counts['already_done']} were already done")

@@ -146,3 +146,8 @@ def test_info_and_compare(tmp_path, capsys):
     assert main(["compare", str(tmp_path / "a.npy"), str(tmp_path / "b.npy"), "--json"]) == 0
     result = json.loads(capsys.readouterr().out)
     assert result["hamming_similarity"] == 0.75 and result["region_ratio"] == 0.5
+    # Over the foreground of b (labels > 0): one region in each, identical.
+    assert main(["compare", str(tmp_path / "a.npy"), str(tmp_path / "b.npy"), "--mask", "b",
+                 "--json"]) == 0
+    masked = json.loads(capsys.readouterr().out)
+    assert masked["hamming_similarity"] == 1.0 and masked["voxels"] == 32

@@ -63,3 +63,16 @@ def test_metric_errors():
         hamming_similarity(np.zeros(3, int), np.zeros(4, int))
     with pytest.raises(ValueError, match="integer labels"):
         hamming_similarity(np.zeros(3), np.zeros(3, int))
+
+
+def test_compare_over_a_mask_scores_only_those_voxels():
+    from volseg.metrics import compare
+
+    a = np.array([0, 0, 1, 1, 2, 2])
+    b = np.array([5, 6, 1, 1, 2, 2])  # differs only where the mask is off
+    mask = np.array([False, False, True, True, True, True])
+    assert compare(a, b)["hamming_similarity"] < 1
+    scores = compare(a, b, mask=mask)
+    assert scores["hamming_similarity"] == 1.0 and scores["voxels"] == 4
+    with pytest.raises(ValueError, match="boolean array"):
+        compare(a, b, mask=mask.astype(int))

@@ -35,7 +35,7 @@ def tiny(tmp_path_factory):
 
 def _task(level, seed, operator="weighted", dataset="alpha"):
     return {"dataset": dataset, "checksum": "x", "operator": operator, "regions": 8,
-            "cut": "threshold", "level": level, "seed": seed}
+            "cut": "threshold", "mask": "none", "level": level, "seed": seed}
 
 
 def _done_rows(db):
@@ -235,3 +235,20 @@ def test_two_runs_on_one_folder_do_not_compute_the_same_tasks(tiny, tmp_path, ca
         assert ns.main(["--out", str(tmp_path), "--datasets", tiny[0], "--seeds", "1",
                         "--levels", "0", "--operators", "weighted", "-q"]) == 2
     assert "another noise-stability run is using it" in capsys.readouterr().err
+
+
+def test_masked_run_segments_and_scores_the_clean_foreground_only():
+    volume = _volume(4)
+    volume[:12] = 0  # an exact-zero half: auto masks it
+    reference = ns.clean_reference(volume, "weighted", 6, mask="auto")
+    assert reference["mask"] is not None and not reference["mask"][:12].any()
+    row = ns.run_task({**_task(1.0, 0), "mask": "auto"}, volume, reference)
+    noisy = ns.noisy_volume(volume, 1.0, 0, "alpha", reference["value_range"])
+    from volseg import compare, segment_volume
+
+    direct = segment_volume(noisy, value_scale=reference["value_scale"], mask=reference["mask"],
+                            min_persistence=reference["threshold"])
+    assert (direct.labels[:12] == 0).all()
+    expected = compare(reference["labels"], direct.labels, mask=reference["mask"])
+    assert row["similarity"] == expected["hamming_similarity"]
+    assert expected["voxels"] == int(reference["mask"].sum())

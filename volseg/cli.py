@@ -88,6 +88,10 @@ def _get_parser() -> argparse.ArgumentParser:
     compare = sub.add_parser("compare", help="compare two label volumes (Huang-Dom)")
     compare.add_argument("labels_a", metavar="LABELS_A")
     compare.add_argument("labels_b", metavar="LABELS_B")
+    compare.add_argument("--mask", metavar="MASK",
+                         help="score only the voxels where this volume is nonzero (a mask, or "
+                         "a label volume whose 0 is background); 'a' or 'b': the foreground "
+                         "(labels > 0) of that input")
     compare.add_argument("--json", action="store_true")
     return parser
 
@@ -274,7 +278,15 @@ def _cmd_compare(args):
     b = _load(args.labels_b).data
     if a.dtype.kind == "f" or b.dtype.kind == "f":
         raise UsageError("label volumes must hold integer labels")
-    result = metrics.compare(a, b)
+    if a.shape != b.shape:
+        raise UsageError(f"{args.labels_a} is {a.shape} but {args.labels_b} is {b.shape}")
+    mask = None
+    if args.mask:
+        mask = {"a": a, "b": b}.get(args.mask)
+        mask = (_load(args.mask).data if mask is None else mask) != 0
+        if mask.shape != a.shape:
+            raise UsageError(f"--mask {args.mask} is {mask.shape}, the labels are {a.shape}")
+    result = metrics.compare(a, b, mask=mask)
     if args.json:
         print(_json.dumps(result, indent=2))
     else:

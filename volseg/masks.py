@@ -97,7 +97,7 @@ def foreground_mask(volume, rule="auto") -> MaskChoice:
     if name == "otsu":
         from skimage.filters import threshold_otsu
 
-        threshold = float(threshold_otsu(data))
+        threshold = float(threshold_otsu(data.ravel()))
         return _checked(MaskChoice(data > threshold, "otsu", f"value>{threshold:g}", 0))
     match = _THRESHOLD.match(name)
     if match is None:

@@ -98,17 +98,36 @@ def _variation_of_information(table) -> float:
     return float(max(entropy(pa) + entropy(pb) - 2 * mutual, 0.0))
 
 
-def compare(a: ArrayLike, b: ArrayLike) -> dict:
+def compare(a: ArrayLike, b: ArrayLike, *, mask: ArrayLike | None = None) -> dict:
     """Every score of `a` against `b` from one contingency table (4x cheaper than
     calling the functions one by one).
+
+    Parameters
+    ----------
+    a, b : array_like of int
+        Two segmentations of the same voxels. Every label is a region, 0 included:
+        to leave a background out, pass `mask`.
+    mask : array_like of bool, optional
+        Score only these voxels (for volseg's outputs, ``labels > 0`` of the
+        reference is its foreground).
 
     Returns
     -------
     dict
         ``hamming_similarity``, ``directional_hamming_a_to_b`` (D_H(A => B), voxels),
         ``directional_hamming_b_to_a``, ``region_ratio``, ``variation_of_information``,
-        ``regions_a``, ``regions_b``.
+        ``regions_a``, ``regions_b``, ``voxels`` (how many were scored).
     """
+    if mask is not None:
+        a, b, mask = np.asarray(a), np.asarray(b), np.asarray(mask)
+        if mask.dtype != bool or mask.shape != a.shape:
+            raise ValueError(f"`mask` must be a boolean array of the segmentations' shape "
+                             f"{a.shape}, got {mask.dtype} {mask.shape}")
+        if a.shape != b.shape:
+            raise ValueError(f"segmentations must have the same shape, got {a.shape} and {b.shape}")
+        if not mask.any():
+            raise ValueError("`mask` selects no voxel")
+        a, b = a[mask], b[mask]
     table = contingency_table(a, b)
     n = int(table.sum())
     a_to_b = n - int(table.max(axis=0).toarray().sum())
@@ -122,4 +141,5 @@ def compare(a: ArrayLike, b: ArrayLike) -> dict:
         "variation_of_information": _variation_of_information(table),
         "regions_a": ka,
         "regions_b": kb,
+        "voxels": n,
     }
