@@ -27,11 +27,11 @@ from pathlib import Path
 
 import numpy as np
 
+from volseg.curvature import REGISTRY
+
 from ._output import save_figure, write_csv, write_text
 
-OPERATORS = ("weighted", "laplace_beltrami")
-LABELS = {"weighted": "weighted distortion", "laplace_beltrami": "Laplace-Beltrami"}
-COLORS = {"weighted": "tab:blue", "laplace_beltrami": "tab:red"}
+OPERATORS = ("weighted", "laplace_beltrami")  # the two the paper's Figs. 2 and 3 compare
 SMOOTHING = 50
 
 
@@ -258,8 +258,8 @@ def _panel(ax, summary, experiment, tessellation, x_key, title, xlabel, log_x=Tr
             if not line:
                 continue
             xs, ys = zip(*line, strict=True)
-            label = LABELS[operator] + (f", {group.replace('_', ' ')} {value}" if group else "")
-            ax.plot(xs, ys, ["o-", "s--", "^:"][number % 3], color=COLORS[operator],
+            label = REGISTRY[operator].label + (f", {group.replace('_', ' ')} {value}" if group else "")
+            ax.plot(xs, ys, ["o-", "s--", "^:"][number % 3], color=REGISTRY[operator].colour,
                     label=label, markersize=4)
     if log_x:
         ax.set_xscale("log")

@@ -4,10 +4,10 @@ from numpy.testing import assert_allclose
 
 from volseg import mesh, tessellation
 from volseg.analytic import FUNCTIONS
-from volseg.curvature import bending_angles, cotangent_weights, vertex_curvature
+from volseg.curvature import REGISTRY, bending_angles, cotangent_weights, vertex_curvature
 
-ALL = ["weighted", "unweighted", "laplace_beltrami", "intrinsic"]
-ORIENTED = ["weighted", "unweighted", "laplace_beltrami"]
+ALL = list(REGISTRY)
+ORIENTED = [name for name, op in REGISTRY.items() if op.oriented]
 
 
 def plane_triangulation(n=6):

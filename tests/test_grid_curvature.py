@@ -4,9 +4,9 @@ from numpy.testing import assert_allclose
 
 from tests.conftest import smooth_random_field
 from volseg import Volume, tessellation
-from volseg.curvature import default_value_scale, grid_curvature, vertex_curvature
+from volseg.curvature import REGISTRY, default_value_scale, grid_curvature, vertex_curvature
 
-ALL = ["weighted", "unweighted", "laplace_beltrami", "intrinsic"]
+ALL = list(REGISTRY)
 INNER = (slice(1, -1),) * 3
 
 
@@ -69,7 +69,7 @@ def test_grid_errors():
         grid_curvature(np.zeros((4, 4)))
     with pytest.raises(ValueError, match="at least 2 samples"):
         grid_curvature(np.zeros((4, 4, 1)))
-    with pytest.raises(ValueError, match="non-finite"):
+    with pytest.raises(ValueError, match="NaN or infinite values"):
         grid_curvature(np.full((3, 3, 3), np.inf))
     with pytest.raises(ValueError, match="`spacing` must be three positive"):
         grid_curvature(np.zeros((3, 3, 3)), spacing=(1, 0, 1))

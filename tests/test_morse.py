@@ -148,7 +148,9 @@ def test_bad_input_is_a_clear_error():
         descending_complex(np.array(["a", "b"]))
 
 
-def test_morse_imports_nothing_else_of_volseg():
+def test_morse_imports_only_its_kernels_and_the_kuhn_leaf():
+    """morse stays usable on its own: of volseg only `_morse_kernels` and `_kuhn`, which
+    import nothing of volseg themselves."""
     import ast
     import inspect
 
@@ -157,9 +159,15 @@ def test_morse_imports_nothing_else_of_volseg():
     tree = ast.parse(inspect.getsource(morse))
     for node in ast.walk(tree):
         if isinstance(node, ast.ImportFrom) and node.level:
-            assert [a.name for a in node.names] == ["_morse_kernels"], ast.dump(node)
+            assert [a.name for a in node.names] in (["_morse_kernels"], ["_kuhn"]), ast.dump(node)
         if isinstance(node, ast.Import):
             assert not any(a.name.startswith("volseg") for a in node.names)
+    import volseg._kuhn as kuhn
+    import volseg._morse_kernels as kernels
+
+    for leaf in (kuhn, kernels):
+        for node in ast.walk(ast.parse(inspect.getsource(leaf))):
+            assert not (isinstance(node, ast.ImportFrom) and node.level), ast.dump(node)
 
 
 def _reference_persistence(values, edges):

@@ -9,7 +9,7 @@ from volseg.analytic import FUNCTIONS
 from volseg.mesh import faces, is_consistently_oriented, ring_average
 from volseg.noise import add_normal_noise
 from volseg.tessellation import kuhn_cube_mesh
-from volseg.tessellation.diamond import _tet_error, decode, diamond_mesh
+from volseg.tessellation.diamond import decode, diamond_mesh, interpolation_error
 from volseg.tessellation.irregular import dihedral_angles, irregular_cube_mesh, lift
 
 
@@ -152,8 +152,7 @@ def test_adaptive_diamond_mesh_is_conforming_and_holds_its_error_bound(name):
     assert 50 < len(mesh.grid) < (n + 1) ** 3  # adaptive: neither the root nor everything
     assert_valid_cube_tessellation(mesh.points, mesh.tetrahedra)
     assert _hanging_vertices(mesh) == 0
-    worst = max(_tet_error(values, [tuple(p) for p in tet]) for tet in mesh.grid[mesh.tetrahedra])
-    assert worst <= eps
+    assert interpolation_error(values, mesh.grid[mesh.tetrahedra]) <= eps
     # A looser bound gives a coarser mesh.
     assert len(diamond_mesh(values, 4 * eps).grid) < len(mesh.grid)
 

@@ -67,7 +67,9 @@ def relabel(vertices, cell, ids):
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _find(parent, x):
+def find_root(parent, x):
+    """Root of x in a union-find forest, halving the path on the way (shared with
+    `_star_kernels`)."""
     while parent[x] != x:
         parent[x] = parent[parent[x]]
         x = parent[x]
@@ -164,8 +166,8 @@ def kruskal(order, edge_a, edge_b, edge_v, n_max, ev_young, ev_elder, ev_target,
         e = order[idx]
         ca = edge_a[e]
         cb = edge_b[e]
-        ra = _find(parent, ca)
-        rb = _find(parent, cb)
+        ra = find_root(parent, ca)
+        rb = find_root(parent, cb)
         if ra == rb:
             continue
         if ra < rb:

@@ -3,13 +3,7 @@
 import numba
 import numpy as np
 
-
-@numba.njit(cache=True, nogil=True, inline="always")
-def _find(parent, x):
-    while parent[x] != x:
-        parent[x] = parent[parent[x]]
-        x = parent[x]
-    return x
+from ._morse_kernels import find_root
 
 
 @numba.njit(cache=True, nogil=True)
@@ -32,15 +26,15 @@ def star_pieces(simplices, face_owner, face_opposite, n_vertices, pieces):
             v = simplices[sa, i]
             for j in range(width):
                 if j != cb and simplices[sb, j] == v:
-                    ra = _find(parent, sa * width + i)
-                    rb = _find(parent, sb * width + j)
+                    ra = find_root(parent, sa * width + i)
+                    rb = find_root(parent, sb * width + j)
                     if ra != rb:
                         parent[ra] = rb
                     break
     root = np.full(n_vertices, -1, dtype=np.int64)
     for node in range(n_simplices * width):
         v = simplices[node // width, node % width]
-        r = _find(parent, node)
+        r = find_root(parent, node)
         if root[v] < 0:
             root[v] = r
             pieces[v] = 1

@@ -1,7 +1,8 @@
 """Descending Morse complex of a vertex field, simplified hierarchically by persistence.
 
-Stands alone: it imports nothing else of volseg (numpy, scipy and numba; networkx
-only for graph input and `region_adjacency`). DESIGN.md section 5 is the contract:
+Stands alone: of volseg it imports only its compiled kernels (`volseg._morse_kernels`)
+and the Kuhn leaf module (`volseg._kuhn`, the grid neighbourhood); otherwise numpy,
+scipy and numba, networkx only for graph input and `region_adjacency`. DESIGN.md section 5 is the contract:
 
 - order: simulation of simplicity, u is higher than v when (f(u), u) > (f(v), v),
   so every result is deterministic and plateaus need no special case;
@@ -38,6 +39,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+
+from . import _kuhn
 
 __all__ = ["descending_complex", "MorseHierarchy", "grid_offsets", "check_cut"]
 
@@ -77,18 +80,16 @@ def grid_offsets(ndim: int, connectivity="kuhn") -> NDArray[np.intp]:
     2-D: 6, +-(1,0), +-(0,1), +-(1,1); 1-D: 2). Integers: 6, 18, 26 (3-D), 4, 8
     (2-D), 2 (1-D): face, edge and corner neighbours.
     """
-    steps = [np.array(s) for s in itertools.product((-1, 0, 1), repeat=ndim) if any(s)]
     if connectivity == "kuhn":
-        # Kuhn edges join points whose difference is a 0/1 vector or its negative.
-        chosen = [s for s in steps if (s >= 0).all() or (s <= 0).all()]
-    else:
-        allowed = {1: {2: 1}, 2: {4: 1, 8: 2}, 3: {6: 1, 18: 2, 26: 3}}.get(ndim, {})
-        if connectivity not in allowed:
-            choices = ", ".join(map(str, ["'kuhn'", *allowed]))
-            raise ValueError(
-                f"`connectivity` {connectivity!r} is not available in {ndim}-D; choose {choices}"
-            )
-        chosen = [s for s in steps if np.abs(s).sum() <= allowed[connectivity]]
+        return _kuhn.neighbour_offsets(ndim)
+    allowed = {1: {2: 1}, 2: {4: 1, 8: 2}, 3: {6: 1, 18: 2, 26: 3}}.get(ndim, {})
+    if connectivity not in allowed:
+        choices = ", ".join(map(str, ["'kuhn'", *allowed]))
+        raise ValueError(
+            f"`connectivity` {connectivity!r} is not available in {ndim}-D; choose {choices}"
+        )
+    steps = [np.array(s) for s in itertools.product((-1, 0, 1), repeat=ndim) if any(s)]
+    chosen = [s for s in steps if np.abs(s).sum() <= allowed[connectivity]]
     return np.array(chosen, dtype=np.intp).reshape(-1, ndim)
 
 

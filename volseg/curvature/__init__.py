@@ -7,13 +7,26 @@
   `vertex_volumes` and `per_vertex_normals`.
 """
 
-from ._common import OPERATORS, normalize_operator
+from ._common import MeshParts
 from ._extrinsic import bending_angles
 from ._laplace import cotangent_weights
+from ._registry import (
+    OPERATORS,
+    REGISTRY,
+    Operator,
+    cli_choices,
+    get_operator,
+    normalize_operator,
+)
 from ._vertex import vertex_curvature
 
 __all__ = [
     "OPERATORS",
+    "REGISTRY",
+    "Operator",
+    "MeshParts",
+    "get_operator",
+    "cli_choices",
     "normalize_operator",
     "vertex_curvature",
     "grid_curvature",

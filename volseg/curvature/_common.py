@@ -1,29 +1,23 @@
-"""Shared front-door checks for the curvature operators."""
+"""Shared pieces of the mesh operators: their input and the checks on it."""
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
 from .. import mesh as _mesh
 
-OPERATORS = ("weighted", "unweighted", "laplace_beltrami", "intrinsic")
-_ALIASES = {
-    "laplace-beltrami": "laplace_beltrami",
-    "lb": "laplace_beltrami",
-    "cotangent": "laplace_beltrami",
-    "distortion": "unweighted",
-}
+class MeshParts(NamedTuple):
+    """What every mesh operator receives: a checked mesh and its shared pieces."""
 
-
-def normalize_operator(operator: str) -> str:
-    """Canonical operator name; accepts hyphens and a few aliases."""
-    name = _ALIASES.get(str(operator).lower(), str(operator).lower())
-    if name not in OPERATORS:
-        raise ValueError(f"unknown `operator` {operator!r}; choose one of {', '.join(OPERATORS)}")
-    return name
+    vertices: NDArray[np.float64]       # (V, n+1)
+    simplices: NDArray[np.intp]         # (S, n+1)
+    faces: _mesh.Faces
+    raw_normals: NDArray[np.float64]    # (S, n+1), |raw| = n! |sigma|
+    volumes: NDArray[np.float64]        # (S,) n-volumes
 
 
 def edge_gram(edges: NDArray[np.float64]) -> NDArray[np.float64]:

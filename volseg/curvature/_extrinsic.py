@@ -32,6 +32,14 @@ def _bending(vertices, simplices, faces, raw_normals):
     return face_vertices, psi, measure / math.factorial(n - 1)
 
 
+def weighted_distortion(parts):
+    return extrinsic_distortion(parts, weighted=True)
+
+
+def unweighted_distortion(parts):
+    return extrinsic_distortion(parts, weighted=False)
+
+
 def bending_angles(
     vertices: ArrayLike, simplices: ArrayLike
 ) -> tuple[NDArray[np.intp], NDArray[np.float64], NDArray[np.float64]]:
@@ -68,10 +76,11 @@ def bending_angles(
     return _bending(vertices, simplices, faces, raw)
 
 
-def extrinsic_distortion(vertices, simplices, faces, raw_normals, volumes, *, weighted):
+def extrinsic_distortion(parts, *, weighted):
     """Per-vertex sum of psi (unweighted) or sum psi |tau| / (n^2 |p|) (weighted)."""
+    vertices, simplices, volumes = parts.vertices, parts.simplices, parts.volumes
     n = simplices.shape[1] - 1
-    face_vertices, psi, measure = _bending(vertices, simplices, faces, raw_normals)
+    face_vertices, psi, measure = _bending(vertices, simplices, parts.faces, parts.raw_normals)
     values = psi * measure if weighted else psi
     total = np.bincount(
         face_vertices.ravel(), weights=np.repeat(values, n), minlength=len(vertices)

@@ -2,16 +2,14 @@
 
 from __future__ import annotations
 
-import itertools
-
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ._common import normalize_operator
+from .. import _kuhn, _validate
+from ._registry import get_operator
 
 __all__ = ["grid_curvature", "default_value_scale"]
 
-_CODES = {"weighted": 0, "unweighted": 1, "laplace_beltrami": 2, "intrinsic": 3}
 _PADDING = {"linear": {"mode": "reflect", "reflect_type": "odd"}, "mirror": {"mode": "reflect"}}
 
 
@@ -25,14 +23,12 @@ def _tables():
     offsets = np.array([[a, b, c] for a in (0, 1) for b in (0, 1) for c in (0, 1)]
                        + [-unit[0], -unit[1], -unit[2]], dtype=np.int64)
     index = {tuple(o): n for n, o in enumerate(offsets)}
-    paths, axes = [], []
-    for a, b, c in itertools.permutations(range(3)):
-        paths.append([(0, 0, 0), unit[a], unit[a] + unit[b], (1, 1, 1)])
-        axes.append([a, b, c])
-    for a, b, c in itertools.permutations(range(3)):
+    paths = [list(map(tuple, path)) for path in _kuhn.cube_paths(3)]
+    axes = [list(order) for order in _kuhn.axis_orders(3)]
+    for path, (a, b, c) in zip(_kuhn.cube_paths(3), _kuhn.axis_orders(3)):
         # The tetrahedron (c, a, b) of the cube below along c shares the face
         # {0, e_a, e_a + e_b} with this cube's tetrahedron (a, b, c).
-        paths.append([-unit[c], (0, 0, 0), unit[a], unit[a] + unit[b]])
+        paths.append([tuple(-unit[c]), *map(tuple, path[:3])])
         axes.append([c, a, b])
     path_idx = np.array([[index[tuple(p)] for p in path] for path in paths], dtype=np.int64)
     faces, far, tets = [], [], []
@@ -135,50 +131,29 @@ def grid_curvature(
     >>> round(float(h[16, 16, 16]), 2)  # the peak of -0.4|x|^2: H = +0.8
     0.8
     """
-    from ._grid_kernels import grid_kernel
-
-    operator = normalize_operator(operator)
-    if boundary not in _PADDING:
-        raise ValueError(f"unknown `boundary` {boundary!r}; choose one of {', '.join(_PADDING)}")
-    if spacing is None:
-        spacing = getattr(volume, "spacing", (1.0, 1.0, 1.0))
-    data = np.asarray(volume)
-    if data.ndim != 3:
-        raise ValueError(f"`volume` must be 3-D, got shape {data.shape}")
-    if min(data.shape) < 2:
-        raise ValueError(f"`volume` needs at least 2 samples along each axis, got shape {data.shape}")
-    if not np.issubdtype(data.dtype, np.number) or np.issubdtype(data.dtype, np.complexfloating):
-        raise ValueError(f"`volume` must hold real numbers, got dtype {data.dtype}")
-    h = np.broadcast_to(np.asarray(spacing, dtype=np.float64), (3,)).copy()
-    if not (np.isfinite(h).all() and (h > 0).all()):
-        raise ValueError(f"`spacing` must be three positive numbers, got {tuple(h)}")
-    if not np.isfinite(data).all():
-        raise ValueError(f"`volume` holds {int((~np.isfinite(data)).sum())} non-finite values")
+    entry = get_operator(operator)
+    check_boundary(boundary)
+    h = _validate.spacing(spacing, getattr(volume, "spacing", (1.0, 1.0, 1.0)))
+    data = _validate.volume_array(volume)
     if value_scale is None:
         value_scale = default_value_scale(data, h)
-    if not (np.isfinite(value_scale) and value_scale > 0):
-        raise ValueError(f"`value_scale` must be a positive number, got {value_scale}")
+    return checked_grid_curvature(data, entry, h, _validate.value_scale(value_scale), boundary)
+
+
+def check_boundary(boundary: str) -> str:
+    if boundary not in _PADDING:
+        raise ValueError(f"unknown `boundary` {boundary!r}; choose one of {', '.join(_PADDING)}")
+    return boundary
+
+
+def checked_grid_curvature(data, entry, spacing, value_scale, boundary) -> NDArray[np.float64]:
+    """`grid_curvature` of arguments already checked by `volseg._validate` (a 3-D real
+    finite array, an `Operator` entry, three positive spacings, a positive scale)."""
+    from ._grid_kernels import grid_kernel
+
+    h = np.array(spacing, dtype=np.float64)
     fp = np.pad(data.astype(np.float64) * value_scale, 1, **_PADDING[boundary])
-    code = _CODES[operator]
-    n_acc = 9 if operator == "laplace_beltrami" else 2
-    acc = np.zeros((n_acc,) + fp.shape)
-    grid_kernel(fp, h, code, _kernel_tables(h), _barycentric_gradients(h), acc)
+    acc = np.zeros((entry.grid_channels,) + fp.shape)
+    grid_kernel(fp, h, entry.grid_code, _kernel_tables(h), _barycentric_gradients(h), acc)
     del fp
-    inner = (slice(1, -1),) * 3
-    if operator == "weighted":
-        return acc[0][inner] / (9.0 * acc[1][inner])
-    if operator == "unweighted":
-        return acc[0][inner].copy()
-    if operator == "intrinsic":
-        return 4.0 * np.pi - acc[1][inner]
-    # K = acc[2:6] / |p| in place; the normal's last part is 24 V0 everywhere.
-    star = acc[1][inner]
-    k = acc[2:6][(slice(None),) + inner]
-    k /= star
-    dot = k[3] * (4.0 * h.prod())
-    for c in range(3):
-        dot += k[c] * acc[6 + c][inner]
-    norm = np.sqrt(np.einsum("c...,c...->...", k, k))
-    norm /= 3.0
-    norm[dot < 0] *= -1.0
-    return norm
+    return entry.grid_finish(acc, (slice(1, -1),) * 3, h)

@@ -14,7 +14,10 @@ import math
 import numba
 import numpy as np
 
-WEIGHTED, UNWEIGHTED, LAPLACE_BELTRAMI, INTRINSIC = 0, 1, 2, 3
+from ._registry import GRID_CODES
+
+WEIGHTED, UNWEIGHTED = GRID_CODES["weighted"], GRID_CODES["unweighted"]
+LAPLACE_BELTRAMI, INTRINSIC = GRID_CODES["laplace_beltrami"], GRID_CODES["intrinsic"]
 
 
 @numba.njit(cache=True, nogil=True)

@@ -20,7 +20,9 @@ def _solid_angle(u, v, w, volumes):
     return 2.0 * np.arctan2(6.0 * volumes, denominator)
 
 
-def intrinsic_distortion(vertices, simplices, volumes):
+def intrinsic_distortion(parts):
+    """2 pi minus the angles at p (n = 2), 4 pi minus the solid angles (n = 3)."""
+    vertices, simplices, volumes = parts.vertices, parts.simplices, parts.volumes
     n = simplices.shape[1] - 1
     n_vertices = len(vertices)
     total = np.zeros(n_vertices)

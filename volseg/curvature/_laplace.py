@@ -98,10 +98,11 @@ def cotangent_weights(vertices: ArrayLike, simplices: ArrayLike) -> sparse.csr_m
     return (matrix - sparse.diags(np.asarray(matrix.sum(axis=1)).ravel())).tocsr()
 
 
-def laplace_beltrami(vertices, simplices, raw_normals):
+def laplace_beltrami(parts):
     """H = sign(K . nu_p) |K| / n with K = (1/|p|) sum_j w_pj (p - x_j)."""
     from ._mesh_kernels import volume_gradient_kernel
 
+    vertices, simplices, raw_normals = parts.vertices, parts.simplices, parts.raw_normals
     n = simplices.shape[1] - 1
     n_vertices = len(vertices)
     k_vec = np.zeros((n_vertices, vertices.shape[1]))

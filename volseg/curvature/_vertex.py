@@ -8,15 +8,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .. import mesh as _mesh
-from ._common import (
-    check_nondegenerate,
-    normalize_operator,
-    require_consistent,
-    require_manifold,
-)
-from ._extrinsic import extrinsic_distortion
-from ._intrinsic import intrinsic_distortion
-from ._laplace import laplace_beltrami
+from ._common import MeshParts, check_nondegenerate, require_consistent, require_manifold
+from ._registry import get_operator
 
 _BOUNDARY = ("nan", "partial")
 
@@ -69,13 +62,14 @@ def vertex_curvature(
     >>> round(float(vertex_curvature(circle, edges).mean()), 3)  # 1/r
     0.5
     """
-    operator = normalize_operator(operator)
+    entry = get_operator(operator)
     if boundary not in _BOUNDARY:
         raise ValueError(f"unknown `boundary` {boundary!r}; choose one of {', '.join(_BOUNDARY)}")
     vertices, simplices = _mesh.check_mesh(vertices, simplices)
     n = simplices.shape[1] - 1
-    if operator == "intrinsic" and n not in (2, 3):
-        raise ValueError(f"the 'intrinsic' operator is defined for n = 2 and n = 3, got n = {n}")
+    if entry.dimensions is not None and n not in entry.dimensions:
+        allowed = " and ".join(f"n = {d}" for d in entry.dimensions)
+        raise ValueError(f"the {entry.name!r} operator is defined for {allowed}, got n = {n}")
     faces = _mesh.faces(simplices, len(vertices))
     require_manifold(simplices, faces, len(vertices))
     edges = _mesh._edge_vectors(vertices, simplices)
@@ -83,16 +77,9 @@ def vertex_curvature(
     volumes = np.linalg.norm(raw, axis=1) / math.factorial(n)
     check_nondegenerate(edges, simplices, volumes)
     del edges
-    if operator != "intrinsic":
+    if entry.oriented:
         require_consistent(faces)
-    if operator in ("weighted", "unweighted"):
-        result = extrinsic_distortion(
-            vertices, simplices, faces, raw, volumes, weighted=operator == "weighted"
-        )
-    elif operator == "laplace_beltrami":
-        result = laplace_beltrami(vertices, simplices, raw)
-    else:
-        result = intrinsic_distortion(vertices, simplices, volumes)
+    result = entry.mesh(MeshParts(vertices, simplices, faces, raw, volumes))
     used = np.zeros(len(vertices), dtype=bool)
     used[simplices.ravel()] = True
     result[~used] = np.nan

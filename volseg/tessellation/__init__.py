@@ -2,11 +2,10 @@
 
 from .diamond import DiamondMesh, decode, diamond_mesh
 from .irregular import IrregularMesh, irregular_cube_mesh, lift, orient_upward
-from .kuhn import KUHN_OFFSETS_3D, kuhn_cube_mesh, kuhn_grid_mesh, kuhn_simplices
+from .kuhn import kuhn_cube_mesh, kuhn_grid_mesh, kuhn_simplices
 from .shapes import cylinder, polygon, sphere, subdivide
 
 __all__ = [
-    "KUHN_OFFSETS_3D",
     "kuhn_simplices",
     "kuhn_grid_mesh",
     "kuhn_cube_mesh",

@@ -18,9 +18,10 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
+from .._kuhn import axis_orders
 from .irregular import orient_upward
 
-__all__ = ["Diamond", "decode", "diamond_mesh", "DiamondMesh"]
+__all__ = ["Diamond", "decode", "diamond_mesh", "DiamondMesh", "interpolation_error"]
 
 
 @dataclass(frozen=True)
@@ -46,7 +47,7 @@ class Diamond:
         out = []
         if self.kind == 0:
             step = [2 * a * ((p1[i] > p0[i]) - (p1[i] < p0[i])) for i in range(3)]
-            for perm in itertools.permutations(range(3)):
+            for perm in axis_orders(3):
                 path = [p0]
                 for axis in perm:
                     path.append(moved(path[-1], axis, step[axis]))
@@ -161,9 +162,14 @@ class DiamondMesh:
     n: int
 
 
-def _tet_error(values, tet):
-    """Max |f - linear interpolant| over the grid samples inside (or on) `tet`."""
-    return float(_tets_error(values, np.array([tet], dtype=np.int64)))
+def interpolation_error(values, tetrahedra) -> float:
+    """Max |f - linear interpolant| over the grid samples inside (or on) the tetrahedra.
+
+    `tetrahedra` is (m, 4, 3) grid coordinates (for a `DiamondMesh`,
+    ``mesh.grid[mesh.tetrahedra]``): the error bound `diamond_mesh` promises.
+    """
+    tets = np.ascontiguousarray(tetrahedra, dtype=np.int64).reshape(-1, 4, 3)
+    return float(_tets_error(np.asarray(values, dtype=np.float64), tets))
 
 
 @numba.njit(cache=True, nogil=True)

@@ -2,30 +2,12 @@
 
 from __future__ import annotations
 
-import itertools
-
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["kuhn_simplices", "kuhn_grid_mesh", "kuhn_cube_mesh", "KUHN_OFFSETS_3D"]
+from .._kuhn import axis_orders, cube_paths, permutation_sign
 
-#: The 14 neighbour offsets of an interior vertex of the 3-D Kuhn grid.
-KUHN_OFFSETS_3D = np.array(
-    [s * np.array(o) for o in [(1, 0, 0), (0, 1, 0), (0, 0, 1), (1, 1, 0), (0, 1, 1), (1, 0, 1),
-                               (1, 1, 1)] for s in (1, -1)],
-    dtype=np.intp,
-)
-
-
-def _permutation_sign(perm) -> int:
-    sign = 1
-    perm = list(perm)
-    for i in range(len(perm)):
-        for j in range(i + 1, len(perm)):
-            if perm[i] > perm[j]:
-                sign = -sign
-    return sign
-
+__all__ = ["kuhn_simplices", "kuhn_grid_mesh", "kuhn_cube_mesh"]
 
 def kuhn_simplices(shape, *, periodic=(), upward: bool = True) -> NDArray[np.intp]:
     """Simplices of the Kuhn split of every cell of a grid of `shape` points.
@@ -58,12 +40,7 @@ def kuhn_simplices(shape, *, periodic=(), upward: bool = True) -> NDArray[np.int
         np.meshgrid(*[np.arange(c) for c in cells_per_axis], indexing="ij"), axis=-1
     ).reshape(-1, d)
     out = []
-    for perm in itertools.permutations(range(d)):
-        path = [np.zeros(d, dtype=np.intp)]
-        for axis in perm:
-            step = path[-1].copy()
-            step[axis] += 1
-            path.append(step)
+    for perm, path in zip(axis_orders(d), cube_paths(d)):
         points = [corners + p for p in path]
         for a in periodic:
             for p in points:
@@ -72,7 +49,7 @@ def kuhn_simplices(shape, *, periodic=(), upward: bool = True) -> NDArray[np.int
         # Base orientation is sign(perm); the graph normal's last component has sign
         # (-1)^d sign(perm) (cofactor convention, DESIGN.md section 2).
         wanted = (-1) ** d if upward else 1
-        if wanted * _permutation_sign(perm) < 0:
+        if wanted * permutation_sign(perm) < 0:
             index[:, [0, 1]] = index[:, [1, 0]]
         out.append(index)
     return np.concatenate(out, axis=0).astype(np.intp)

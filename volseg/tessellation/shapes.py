@@ -7,6 +7,7 @@ import itertools
 import numpy as np
 from numpy.typing import NDArray
 
+from .._kuhn import axis_orders
 from .kuhn import kuhn_simplices
 
 __all__ = ["polygon", "sphere", "cylinder", "subdivide"]
@@ -28,7 +29,7 @@ def _freudenthal_children(n):
     """
     children = []
     for corner in itertools.product((0, 1), repeat=n):
-        for perm in itertools.permutations(range(n)):
+        for perm in axis_orders(n):
             point = np.array(corner)
             path = [point.copy()]
             for axis in perm:

@@ -1,0 +1,37 @@
+"""Finishing steps of the grid path: per-vertex curvature from the kernel's sums.
+
+Each function takes the accumulator ``acc`` (channels x padded grid), the slice of
+the unpadded voxels and the spacing, and returns the (X, Y, Z) curvature. What each
+channel holds is documented in `_grid_kernels.grid_kernel`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def weighted(acc, inner, h):
+    # sum psi |tau| / (n^2 |p|) with n = 3 and |p| = acc[1] (a quarter of each star volume)
+    return acc[0][inner] / (9.0 * acc[1][inner])
+
+
+def unweighted(acc, inner, h):
+    return acc[0][inner].copy()
+
+
+def intrinsic(acc, inner, h):
+    return 4.0 * np.pi - acc[1][inner]
+
+
+def laplace_beltrami(acc, inner, h):
+    # K = acc[2:6] / |p| in place; the normal's last part is 24 V0 everywhere.
+    star = acc[1][inner]
+    k = acc[2:6][(slice(None),) + inner]
+    k /= star
+    dot = k[3] * (4.0 * h.prod())
+    for c in range(3):
+        dot += k[c] * acc[6 + c][inner]
+    norm = np.sqrt(np.einsum("c...,c...->...", k, k))
+    norm /= 3.0
+    norm[dot < 0] *= -1.0
+    return norm
