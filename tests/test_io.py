@@ -123,7 +123,7 @@ def test_errors_name_the_file_and_the_problem(tmp_path):
     bad = np.zeros((3, 3, 3), np.float32)
     bad[1, 2, 0] = np.nan
     np.save(tmp_path / "nan.npy", bad)
-    with pytest.raises(ValueError, match=r"1 voxels are NaN or infinite \(first at \[x, y, z\] = \(1, 2, 0\)\)"):
+    with pytest.raises(ValueError, match=r"holds 1 NaN or infinite values \(first at \[x, y, z\] = \(1, 2, 0\)\)"):
         read_volume(tmp_path / "nan.npy")
     np.save(tmp_path / "flat.npy", np.zeros((3, 3)))
     with pytest.raises(ValueError, match="must be 3-D"):

@@ -2,11 +2,11 @@ import numpy as np
 import pytest
 
 from volseg import Volume, segment_volume
-from volseg.cli import _synthetic_volume
+from volseg.datasets import demo_volume
 
 
 def test_segment_volume_defaults_to_30_regions_and_accepts_volume_or_array():
-    data = _synthetic_volume(32)
+    data = demo_volume(32)
     result = segment_volume(data)
     assert result.n_regions == 30 and result.labels.shape == data.shape
     again = segment_volume(Volume(data, spacing=(1.0, 1.0, 1.0)))
@@ -98,7 +98,7 @@ def test_mask_rules():
 
 
 def test_smooth_zero_is_bit_identical_and_smoothing_removes_the_checkerboard():
-    data = _synthetic_volume(32)
+    data = demo_volume(32)
     plain = segment_volume(data)
     np.testing.assert_array_equal(segment_volume(data, smooth=0).curvature, plain.curvature)
     smoothed = segment_volume(data, smooth=1.0)
@@ -113,7 +113,7 @@ def test_smooth_zero_is_bit_identical_and_smoothing_removes_the_checkerboard():
 
 
 def test_regions_auto_picks_the_largest_gap_in_the_papers_range():
-    result = segment_volume(_synthetic_volume(32), n_regions="auto")
+    result = segment_volume(demo_volume(32), n_regions="auto")
     assert 20 <= result.n_regions <= 40 and result.cut["auto"]
     p = np.sort(result.hierarchy.event_persistence)[::-1]
     gaps = {k: np.log(p[k - 2]) - np.log(p[k - 1]) for k in range(20, 41)}

@@ -33,9 +33,13 @@ _PUBLIC = {
     "directional_hamming": "volseg.metrics",
     "region_ratio": "volseg.metrics",
     "variation_of_information": "volseg.metrics",
+    "foreground_mask": "volseg.masks",
+    "VolumeFileError": "volseg.io",
+    "DatasetError": "volseg.datasets",
+    "fetch": "volseg.datasets",
 }
-_SUBMODULES = {"io", "mesh", "curvature", "tessellation", "morse", "metrics", "segment",
-               "analytic", "noise", "smoothing", "preview", "cli"}
+_SUBMODULES = {"io", "mesh", "curvature", "tessellation", "morse", "metrics", "masks",
+               "segment", "analytic", "noise", "outputs", "preview", "datasets", "cli"}
 
 __all__ = ["__version__", *_PUBLIC, *sorted(_SUBMODULES)]
 

@@ -6,23 +6,33 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["volume_array", "spacing", "smooth"]
+__all__ = ["volume_array", "spacing", "value_scale", "smooth"]
 
 # Cut parameters (n_regions, min_persistence) are checked by volseg.morse.check_cut,
 # which owns them: the Morse stage stands alone.
 
 
-def volume_array(volume, name: str = "volume") -> NDArray:
-    """A 3-D real, finite array with at least 2 samples per axis (not copied)."""
+def volume_array(volume, name: str = "volume", *, source=None,
+                 error: type[ValueError] = ValueError) -> NDArray:
+    """A 3-D real, finite array with at least 2 samples per axis (not copied).
+
+    Messages name the argument (`name`) or, for a file, start with `source`; `error`
+    is the exception type raised (the readers raise `VolumeFileError`).
+    """
     data = np.asarray(volume)
+    what = f"{source}: the volume" if source is not None else f"`{name}`"
     if data.ndim != 3:
-        raise ValueError(f"`{name}` must be 3-D, got shape {data.shape}")
+        raise error(f"{what} must be 3-D, got shape {data.shape}")
     if min(data.shape) < 2:
-        raise ValueError(f"`{name}` needs at least 2 samples along each axis, got shape {data.shape}")
+        raise error(f"{what} needs at least 2 samples along each axis, got shape {data.shape}")
     if data.dtype.kind not in "biuf":
-        raise ValueError(f"`{name}` must hold real numbers, got dtype {data.dtype}")
-    if data.dtype.kind == "f" and not np.isfinite(data).all():
-        raise ValueError(f"`{name}` holds {int((~np.isfinite(data)).sum())} non-finite values")
+        raise error(f"{what} must hold real numbers, got dtype {data.dtype}")
+    if data.dtype.kind == "f":
+        bad = ~np.isfinite(data)
+        if bad.any():
+            first = tuple(int(i) for i in np.argwhere(bad)[0])
+            raise error(f"{what} holds {int(bad.sum())} NaN or infinite values (first at "
+                        f"[x, y, z] = {first}); replace them (e.g. numpy.nan_to_num) first")
     return data
 
 
@@ -37,6 +47,16 @@ def spacing(value, default=(1.0, 1.0, 1.0)) -> tuple:
         raise ValueError(f"`spacing` must be three positive numbers (dx, dy, dz), got {value!r}")
     return tuple(float(s) for s in array)
 
+
+def value_scale(value) -> float:
+    """The scale s of the value axis: a positive finite number."""
+    try:
+        scale = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"`value_scale` must be a positive number, got {value!r}") from None
+    if not (np.isfinite(scale) and scale > 0):
+        raise ValueError(f"`value_scale` must be a positive number, got {value!r}")
+    return scale
 
 
 def smooth(value) -> float:

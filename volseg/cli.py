@@ -17,8 +17,9 @@ import numpy as np
 
 from . import _json
 from ._version import __version__
+from .curvature import cli_choices, normalize_operator
+from .segment import AUTO_REGION_RANGE, DEFAULT_REGIONS
 
-OPERATOR_CHOICES = ["weighted", "unweighted", "laplace-beltrami", "intrinsic"]
 
 
 class UsageError(ValueError):
@@ -38,11 +39,13 @@ def _get_parser() -> argparse.ArgumentParser:
     seg.add_argument("inputs", nargs="+", metavar="INPUT",
                      help="a volume file (.raw, .dat, .nrrd, .nii, .npy) or a dataset name")
     seg.add_argument("-o", "--out-dir", default=".", help="output folder (default: .)")
-    seg.add_argument("--operator", choices=OPERATOR_CHOICES, default="weighted")
+    operators, shown = cli_choices()
+    seg.add_argument("--operator", choices=operators, metavar=shown, default="weighted")
     cut = seg.add_mutually_exclusive_group()
     cut.add_argument("--regions", type=_regions, metavar="K",
-                     help="number of regions (default 30; with a mask, foreground regions), or "
-                     "'auto': the count in 20-40 at the largest persistence gap")
+                     help=f"number of regions (default {DEFAULT_REGIONS}; with a mask, foreground "
+                     f"regions), or 'auto': the count in {AUTO_REGION_RANGE[0]}-"
+                     f"{AUTO_REGION_RANGE[1]} at the largest persistence gap")
     cut.add_argument("--min-persistence", type=float, metavar="T", help="persistence threshold")
     masking = seg.add_mutually_exclusive_group()
     masking.add_argument("--mask", default="auto", metavar="RULE",
@@ -113,12 +116,11 @@ def _progress(quiet):
 
 
 def _load(input_name, shape=None, dtype=None, allow_external_data=False):
-    """The Volume of a volume file or a named dataset (`data_fetch.resolve`)."""
-    import data_fetch
-
+    """The Volume of a volume file or a named dataset (`volseg.datasets.resolve`)."""
+    from .datasets import resolve
     from .io import read_volume
 
-    path = data_fetch.resolve(input_name)
+    path = resolve(input_name)
     return read_volume(path, shape=shape, dtype=dtype, allow_external_data=allow_external_data)
 
 
@@ -179,19 +181,6 @@ def segment_to_files(volume, outputs, *, operator="weighted", n_regions=None,
     return write_segmentation(outputs, result, data, info, frame=volume.frame, title=title)
 
 
-def _synthetic_volume(n=48):
-    """Built-in demo volume: three Gaussian blobs and a curved ridge, uint8."""
-    axis = np.linspace(-1, 1, n)
-    x, y, z = np.meshgrid(axis, axis, axis, indexing="ij")
-    f = np.zeros_like(x)
-    for (cx, cy, cz), w, a in [((-0.4, -0.3, 0.1), 0.25, 1.0), ((0.45, 0.3, -0.2), 0.2, 0.8),
-                               ((0.1, 0.5, 0.5), 0.15, 0.6)]:
-        f += a * np.exp(-((x - cx) ** 2 + (y - cy) ** 2 + (z - cz) ** 2) / (2 * w * w))
-    ridge = np.exp(-((y + 0.5 * x**2 - 0.55) ** 2 + (z + 0.5) ** 2) / (2 * 0.08**2))
-    f += 0.5 * ridge
-    return np.round(255 * f / f.max()).astype(np.uint8)
-
-
 def _tagged(say, tag):
     return lambda message: say(tag + message)
 
@@ -227,7 +216,7 @@ def _cmd_segment(args):
     _check_out_dir(out_dir)
     mask = args.mask if args.mask_threshold is None else f"value>{args.mask_threshold!r}"
     summaries = _segment_all(
-        volumes, out_dir, args, say, operator=args.operator.replace("-", "_"),
+        volumes, out_dir, args, say, operator=normalize_operator(args.operator),
         n_regions=args.regions, min_persistence=args.min_persistence,
         value_scale=args.value_scale, noise=args.noise, seed=args.seed, mask=mask,
         smooth=args.smooth)
@@ -237,19 +226,20 @@ def _cmd_segment(args):
 
 
 def _cmd_fetch(args):
-    import data_fetch
+    from .datasets import fetch
 
     for name in args.names:
-        print(data_fetch.fetch(name))
+        print(fetch(name))
     return 0
 
 
 def _cmd_demo(args):
+    from .datasets import demo_volume
     from .io import Volume
 
     out_dir = Path(args.out_dir)
     _check_out_dir(out_dir)
-    volume = Volume(_synthetic_volume(), name="demo", source="built-in synthetic")
+    volume = Volume(demo_volume(), name="demo", source="built-in synthetic")
     summary, = _segment_all([volume], out_dir, args, _progress(args.quiet), mask="auto")
     print(f"segmented a built-in {'x'.join(map(str, volume.shape))} volume into "
           f"{summary['n_regions']} regions; wrote:")

@@ -9,7 +9,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from . import _validate
-from .curvature import default_value_scale, grid_curvature, normalize_operator
+from .curvature import default_value_scale, get_operator
+from .curvature._grid import check_boundary, checked_grid_curvature
 from .masks import MaskChoice
 from .morse import MorseHierarchy, check_cut, descending_complex
 
@@ -135,7 +136,7 @@ def segment_volume(
     """
     from .masks import foreground_mask
 
-    operator = normalize_operator(operator)
+    entry = get_operator(operator)
     auto = isinstance(n_regions, str) and n_regions == "auto"
     min_persistence, n_regions = check_cut(min_persistence, None if auto else n_regions)
     if min_persistence is None and n_regions is None and not auto:
@@ -143,6 +144,7 @@ def segment_volume(
     spacing = _validate.spacing(spacing, getattr(volume, "spacing", (1.0, 1.0, 1.0)))
     data = _validate.volume_array(volume)
     smooth = _validate.smooth(smooth)
+    check_boundary(boundary)
     choice = foreground_mask(data, mask)
     timings = {}
     start = time.perf_counter()
@@ -150,10 +152,9 @@ def segment_volume(
         from scipy.ndimage import gaussian_filter
 
         data = gaussian_filter(data.astype(np.float64), smooth, mode="nearest")
-    if value_scale is None:
-        value_scale = default_value_scale(data, spacing)
-    curvature = grid_curvature(data, operator, spacing=spacing, value_scale=value_scale,
-                               boundary=boundary)
+    value_scale = _validate.value_scale(default_value_scale(data, spacing)
+                                        if value_scale is None else value_scale)
+    curvature = checked_grid_curvature(data, entry, spacing, value_scale, boundary)
     timings["curvature"] = time.perf_counter() - start
     start = time.perf_counter()
     hierarchy = descending_complex(curvature, mask=choice.mask)
@@ -168,5 +169,5 @@ def segment_volume(
     k = int(labels.max())
     threshold = float(min_persistence) if min_persistence is not None else hierarchy.threshold_for(k)
     cut = {"min_persistence": min_persistence, "n_regions": n_regions, "auto": auto}
-    return Segmentation(labels, curvature, hierarchy, k, operator, threshold, float(value_scale),
+    return Segmentation(labels, curvature, hierarchy, k, entry.name, threshold, value_scale,
                         spacing, timings, cut, choice, smooth)

@@ -23,6 +23,7 @@ from ._files import (
     read_head,
     regular_file_size,
 )
+from .. import _validate
 from .volume import Frame, Volume, VolumeFileError
 
 __all__ = ["read_volume", "DTYPES"]
@@ -311,21 +312,7 @@ def _read_npy(path: Path, shape, dtype, byte_order, allow_external):
 def _check(path, data: NDArray) -> NDArray:
     while data.ndim > 3 and data.shape[-1] == 1:
         data = data[..., 0]
-    if data.ndim != 3:
-        raise VolumeFileError(f"{path}: a volume must be 3-D, got shape {data.shape}")
-    if min(data.shape) < 2:
-        raise VolumeFileError(f"{path}: need at least 2 samples along each axis, got shape {data.shape}")
-    if data.dtype.kind not in "uif":
-        raise VolumeFileError(f"{path}: voxel type {data.dtype} is not a real number type")
-    if data.dtype.kind == "f":
-        bad = ~np.isfinite(data)
-        if bad.any():
-            first = tuple(int(i) for i in np.argwhere(bad)[0])
-            raise VolumeFileError(
-                f"{path}: {int(bad.sum())} voxels are NaN or infinite (first at [x, y, z] = "
-                f"{first}); replace them (e.g. numpy.nan_to_num) before segmenting"
-            )
-    return data
+    return _validate.volume_array(data, source=path, error=VolumeFileError)
 
 
 def _reader(path: Path):

@@ -1,0 +1,29 @@
+"""The public face: every name `volseg.__all__` promises exists, every submodule imports."""
+
+import importlib
+import pkgutil
+from pathlib import Path
+
+import volseg
+
+
+def test_every_public_name_resolves():
+    for name in volseg.__all__:
+        assert getattr(volseg, name) is not None, name
+    assert sorted(volseg.__all__) == dir(volseg)
+
+
+def test_star_import_works():
+    namespace = {}
+    exec("from volseg import *", namespace)
+    assert "segment_volume" in namespace and "descending_complex" in namespace
+
+
+def test_every_module_of_the_package_imports():
+    for module in pkgutil.walk_packages(volseg.__path__, "volseg."):
+        if module.name != "volseg.__main__":  # runs the command line
+            importlib.import_module(module.name)
+
+
+def test_the_package_says_it_is_typed():
+    assert (Path(volseg.__file__).parent / "py.typed").exists()

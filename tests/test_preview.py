@@ -1,0 +1,41 @@
+"""volseg.preview, directly: the picture, the label convention, the persistence plot."""
+
+import numpy as np
+from PIL import Image
+
+from volseg.preview import write_persistence_plot, write_preview
+
+
+def _case():
+    x = np.linspace(-1, 1, 20)
+    volume = np.exp(-(x[:, None, None] ** 2 + x[None, :, None] ** 2 + x[None, None, :] ** 2) * 4)
+    labels = np.where(volume > 0.2, 1 + (x[:, None, None] > 0), 0).astype(np.int32)
+    labels = np.broadcast_to(labels, volume.shape).copy()
+    return volume, np.gradient(volume)[0], labels
+
+
+def test_preview_is_a_png_with_colour_only_inside_the_labels(tmp_path):
+    volume, curvature, labels = _case()
+    persistence = (np.array([0.5, 0.1, 0.01]), 1, 0.05)
+    path = write_preview(tmp_path / "p.png", volume, curvature, labels, title="case",
+                         persistence=persistence)
+    image = np.asarray(Image.open(path).convert("RGB"))
+    assert image.shape[0] > 300 and image.shape[1] > 600
+    assert len(np.unique(image.reshape(-1, 3), axis=0)) > 50  # not blank
+
+
+def test_label_zero_is_not_coloured(tmp_path):
+    volume, curvature, labels = _case()
+    empty = write_preview(tmp_path / "a.png", volume, curvature, np.zeros_like(labels))
+    full = write_preview(tmp_path / "b.png", volume, curvature, labels)
+    a = np.asarray(Image.open(empty).convert("RGB")).astype(int)
+    b = np.asarray(Image.open(full).convert("RGB")).astype(int)
+    assert a.shape == b.shape and (a != b).any()  # the regions change the picture
+    saturation = lambda im: (im.max(axis=2) - im.min(axis=2)).mean()  # noqa: E731
+    assert saturation(b) > saturation(a)
+
+
+def test_persistence_plot_alone(tmp_path):
+    path = write_persistence_plot(tmp_path / "curve.png", np.geomspace(1, 1e-3, 40), 1, 0.01, 20)
+    image = Image.open(path)
+    assert image.format == "PNG" and image.size[0] > 200
