@@ -77,3 +77,15 @@ def test_grid_errors():
         grid_curvature(np.zeros((3, 3, 3)), value_scale=-1)
     with pytest.raises(ValueError, match="unknown `boundary`"):
         grid_curvature(np.zeros((3, 3, 3)), boundary="wrap")
+
+
+def test_the_generated_stencil_is_what_the_tables_give():
+    """`_grid_stencil.py` is generated from the cube tables; a stale file would silently
+    compute another tessellation's curvature."""
+    from pathlib import Path
+
+    from volseg.curvature import _stencil_codegen
+
+    committed = Path(_stencil_codegen.__file__).with_name("_grid_stencil.py").read_text()
+    assert committed == _stencil_codegen.source(), \
+        "run python -m volseg.curvature._stencil_codegen"

@@ -60,16 +60,6 @@ def _kernel_tables(h):
     return (_OFFSETS, _PATH_IDX, _AXES, _FACE_IDX, side, ub, vb, cross2, _FACE_TETS)
 
 
-def _barycentric_gradients(h):
-    """(6, 4, 3) base gradients of the barycentric coordinates of the 6 cube tetrahedra."""
-    out = np.zeros((6, 4, 3))
-    for t in range(6):
-        for s, axis in enumerate(_AXES[t]):
-            out[t, s, axis] -= 1.0 / h[axis]
-            out[t, s + 1, axis] += 1.0 / h[axis]
-    return out
-
-
 def default_value_scale(volume: ArrayLike, spacing=(1.0, 1.0, 1.0)) -> float:
     """The value scale s that makes a volume's graph as tall as it is wide.
 
@@ -154,6 +144,6 @@ def checked_grid_curvature(data, entry, spacing, value_scale, boundary) -> NDArr
     h = np.array(spacing, dtype=np.float64)
     fp = np.pad(data.astype(np.float64) * value_scale, 1, **_PADDING[boundary])
     acc = np.zeros((entry.grid_channels,) + fp.shape)
-    grid_kernel(fp, h, entry.grid_code, _kernel_tables(h), _barycentric_gradients(h), acc)
+    grid_kernel(fp, h, entry.grid_code, _kernel_tables(h), acc)
     del fp
     return entry.grid_finish(acc, (slice(1, -1),) * 3, h)
