@@ -76,7 +76,7 @@ def find_root(parent, x):
     return x
 
 
-_TABLE_BITS = 12
+_TABLE_BITS = 16  # 64 k pairs (1.5 MB): a chunk of about 2^18 vertices dedups well
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -89,45 +89,64 @@ def _emit(out_a, out_b, out_v, start, n, capacity, a, b, v):
     return n + 1
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _keep(tab_a, tab_b, tab_v, mask, values, out_a, out_b, out_v, start, n, capacity, a, b, v):
+    """Offer edge (a, b) with saddle v to the table; returns the chunk's edge count."""
+    slot = (a * 1000003 + b * 7919) & mask
+    if tab_a[slot] == a and tab_b[slot] == b:
+        if _higher(values, v, tab_v[slot]):
+            tab_v[slot] = v
+        return n
+    if tab_a[slot] >= 0:  # evict the entry in the way
+        n = _emit(out_a, out_b, out_v, start, n, capacity, tab_a[slot], tab_b[slot], tab_v[slot])
+    tab_a[slot] = a
+    tab_b[slot] = b
+    tab_v[slot] = v
+    return n
+
+
 @numba.njit(cache=True, nogil=True)
 def _chunk_edges(values, vertices, lo, hi, grid, offsets, indptr, indices, cell,
                  out_a, out_b, out_v, start, capacity):
     """Cross-cell edges of vertices[lo:hi], deduplicated per cell pair.
 
-    For each vertex v and each higher neighbour u in another cell, the candidate
-    saddle of the cell pair {cell[v], cell[u]} (stored smaller id first) is v. A small direct-mapped table keeps
-    the highest candidate per pair; an evicted entry is emitted, and the table is
-    flushed at the end. Duplicates of a pair may be emitted (they are harmless to
-    Kruskal: only the highest one of a pair can join two components). Writes the
-    first `capacity` edges from out_*[start]; returns how many there were in all.
+    The candidate saddle of an edge {u, v} between two cells is its lower end; the
+    pair is stored smaller cell id first. On a grid each edge is visited once, from
+    its end with the smaller node id (`offsets` holds only the positive half of the
+    neighbourhood); on a graph, from its lower end. A direct-mapped table keeps the
+    highest candidate per pair; an evicted entry is emitted, and the table is
+    flushed at the end. Duplicates of a pair may be emitted (harmless to Kruskal:
+    only the highest one of a pair can join two components). Writes the first
+    `capacity` edges from out_*[start]; returns how many there were in all.
     """
     size = 1 << _TABLE_BITS
     mask = size - 1
-    tab_a = np.full(size, -1, dtype=np.int64)
-    tab_b = np.zeros(size, dtype=np.int64)
-    tab_v = np.zeros(size, dtype=np.int64)
+    tab_a = np.full(size, -1, dtype=cell.dtype)
+    tab_b = np.zeros(size, dtype=cell.dtype)
+    tab_v = np.zeros(size, dtype=vertices.dtype)
     n = 0
     for k in range(lo, hi):
         v = vertices[k]
         cv = cell[v]
-        count = len(offsets) if grid else indptr[v + 1] - indptr[v]
-        for t in range(count):
-            u = v + offsets[t] if grid else indices[indptr[v] + t]
-            cu = cell[u]
-            if cu == cv or not _higher(values, u, v):
-                continue
-            a, b = (cv, cu) if cv < cu else (cu, cv)
-            slot = (a * 1000003 + b * 7919) & mask
-            if tab_a[slot] == a and tab_b[slot] == b:
-                if _higher(values, v, tab_v[slot]):
-                    tab_v[slot] = v
-                continue
-            if tab_a[slot] >= 0:  # evict the entry in the way
-                n = _emit(out_a, out_b, out_v, start, n, capacity,
-                          tab_a[slot], tab_b[slot], tab_v[slot])
-            tab_a[slot] = a
-            tab_b[slot] = b
-            tab_v[slot] = v
+        if grid:
+            for t in range(len(offsets)):
+                u = v + offsets[t]
+                cu = cell[u]
+                if cu < 0 or cu == cv:  # off the vertices (pad, mask) or the same cell
+                    continue
+                a, b = (cv, cu) if cv < cu else (cu, cv)
+                low = u if _higher(values, v, u) else v
+                n = _keep(tab_a, tab_b, tab_v, mask, values, out_a, out_b, out_v, start, n,
+                          capacity, a, b, low)
+        else:
+            for e in range(indptr[v], indptr[v + 1]):
+                u = indices[e]
+                cu = cell[u]
+                if cu == cv or not _higher(values, u, v):
+                    continue
+                a, b = (cv, cu) if cv < cu else (cu, cv)
+                n = _keep(tab_a, tab_b, tab_v, mask, values, out_a, out_b, out_v, start, n,
+                          capacity, a, b, v)
     for slot in range(size):
         if tab_a[slot] >= 0:
             n = _emit(out_a, out_b, out_v, start, n, capacity,
@@ -151,9 +170,21 @@ def cross_edges(values, vertices, bounds, chunks, grid, offsets, indptr, indices
                                  capacity[i])
 
 
+@numba.njit(cache=True, parallel=True)
+def gather(order, edge_a, edge_b, edge_v, out_a, out_b, out_v):
+    """out_*[i] = edge_*[order[i]]: the edges in sweep order, in parallel, so that the
+    union-find reads them sequentially."""
+    for i in numba.prange(len(order)):
+        e = order[i]
+        out_a[i] = edge_a[e]
+        out_b[i] = edge_b[e]
+        out_v[i] = edge_v[e]
+
+
 @numba.njit(cache=True, nogil=True)
-def kruskal(order, edge_a, edge_b, edge_v, n_max, ev_young, ev_elder, ev_target, ev_saddle):
-    """Elder-rule merges over cross-cell edges, order[-1] (highest saddle) first.
+def kruskal(edge_a, edge_b, edge_v, n_max, ev_young, ev_elder, ev_target, ev_saddle):
+    """Elder-rule merges over cross-cell edges sorted by increasing saddle: the last
+    (highest saddle) first.
 
     Maximum ids are by decreasing value, so a component's root is its lowest id.
     Event e: maximum ev_young[e] dies into the component of ev_elder[e] at vertex
@@ -162,8 +193,7 @@ def kruskal(order, edge_a, edge_b, edge_v, n_max, ev_young, ev_elder, ev_target,
     """
     parent = np.arange(n_max)
     n_ev = 0
-    for idx in range(len(order) - 1, -1, -1):
-        e = order[idx]
+    for e in range(len(edge_a) - 1, -1, -1):
         ca = edge_a[e]
         cb = edge_b[e]
         ra = find_root(parent, ca)
@@ -185,12 +215,24 @@ def kruskal(order, edge_a, edge_b, edge_v, n_max, ev_young, ev_elder, ev_target,
     return n_ev
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _before(i, j, saddle, edge_a, edge_b):
+    """Edge i before edge j among equal saddle values: by (saddle vertex, a, b)."""
+    if saddle[i] != saddle[j]:
+        return saddle[i] < saddle[j]
+    if edge_a[i] != edge_a[j]:
+        return edge_a[i] < edge_a[j]
+    return edge_b[i] < edge_b[j]
+
+
 @numba.njit(cache=True, nogil=True)
-def break_ties(order, ranked, saddle):
-    """Within each run of equal `ranked` values, sort `order` by saddle vertex index.
+def break_ties(order, ranked, saddle, edge_a, edge_b):
+    """Within each run of equal `ranked` values, sort `order` by (saddle vertex, a, b).
 
     `order` sorts the values (`ranked` = values[order]) in any tie order; afterwards it
-    sorts by (value, vertex) exactly, so the result does not depend on the sort used.
+    sorts by (value, vertex, cell pair) exactly, so the result does not depend on the
+    sort used, nor on the order in which the edges were found (several edges can
+    share a saddle vertex, and which merges first decides the events' targets).
     """
     n = len(order)
     start = 0
@@ -200,13 +242,22 @@ def break_ties(order, ranked, saddle):
             stop += 1
         if stop - start > 32:
             run = order[start:stop].copy()
-            order[start:stop] = run[np.argsort(saddle[run])]
+            keys = saddle[run]
+            run = run[np.argsort(keys, kind="mergesort")]
+            # equal saddle vertices (a few edges each): insertion sort by the pair
+            for i in range(1, len(run)):
+                item = run[i]
+                j = i - 1
+                while j >= 0 and _before(item, run[j], saddle, edge_a, edge_b):
+                    run[j + 1] = run[j]
+                    j -= 1
+                run[j + 1] = item
+            order[start:stop] = run
         elif stop - start > 1:  # short runs (often one vertex's edges): insertion sort
             for i in range(start + 1, stop):
                 item = order[i]
-                key = saddle[item]
                 j = i - 1
-                while j >= start and saddle[order[j]] > key:
+                while j >= start and _before(item, order[j], saddle, edge_a, edge_b):
                     order[j + 1] = order[j]
                     j -= 1
                 order[j + 1] = item

@@ -142,7 +142,10 @@ def checked_grid_curvature(data, entry, spacing, value_scale, boundary) -> NDArr
     from ._grid_kernels import grid_kernel
 
     h = np.array(spacing, dtype=np.float64)
-    fp = np.pad(data.astype(np.float64) * value_scale, 1, **_PADDING[boundary])
+    scaled = data.astype(np.float64, order="C")  # a copy in C order, whatever the input's
+    scaled *= value_scale
+    fp = np.pad(scaled, 1, **_PADDING[boundary])  # C order in, C order out
+    del scaled
     acc = np.zeros((entry.grid_channels,) + fp.shape)
     grid_kernel(fp, h, entry.grid_code, _kernel_tables(h), acc)
     del fp
