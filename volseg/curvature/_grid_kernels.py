@@ -18,7 +18,7 @@ import math
 import numba
 import numpy as np
 
-from ._grid_stencil import extrinsic_slab, laplace_beltrami_slab
+from ._grid_stencil import laplace_beltrami_slab, unweighted_slab, weighted_slab
 from ._registry import GRID_CODES
 
 WEIGHTED, UNWEIGHTED = GRID_CODES["weighted"], GRID_CODES["unweighted"]
@@ -74,7 +74,7 @@ def grid_kernel(fp, h, operator, tables, acc):
     sum of |sigma| grad(phi_p) and acc[6:9] the x, y, z parts of the sum of
     |sigma| nu (its last part is 24 V0 at every vertex with a full star).
     """
-    side, ub, vb, cross2 = tables[4], tables[5], tables[6], tables[7]
+    cross2 = tables[7]
     shape = fp.shape
     fpf = fp.reshape(-1)
     flat = acc.reshape(acc.shape[0], -1)
@@ -82,9 +82,10 @@ def grid_kernel(fp, h, operator, tables, acc):
     for parity in range(2):
         for half in numba.prange((n_slabs - parity + 1) // 2):
             i = 2 * half + parity
-            if operator == WEIGHTED or operator == UNWEIGHTED:
-                extrinsic_slab(fpf, shape, i, h, operator == WEIGHTED, side, ub, vb, cross2,
-                               flat[0], flat[1])
+            if operator == WEIGHTED:
+                weighted_slab(fpf, shape, i, h, cross2, flat[0], flat[1])
+            elif operator == UNWEIGHTED:
+                unweighted_slab(fpf, shape, i, h, cross2, flat[0], flat[1])
             elif operator == LAPLACE_BELTRAMI:
                 laplace_beltrami_slab(fpf, shape, i, h, flat)
             else:

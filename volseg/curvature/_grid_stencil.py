@@ -13,8 +13,9 @@ import numba
 
 
 @numba.njit(cache=True, nogil=True)
-def extrinsic_slab(fpf, shape, i, h, weighted, side, ub, vb, cross2, acc0, acc1):
-    """sum psi (|tau|-weighted if `weighted`) into acc0, sum |sigma|/4 into acc1."""
+def weighted_slab(fpf, shape, i, h, cross2, acc0, acc1):
+    """sum psi |tau| into acc0, sum |sigma|/4 into acc1. cross2[f] is |u_b x v_b|^2 of face
+    f's base edges (spacing folded in)."""
     sx, sy = shape[1] * shape[2], shape[2]
     o0 = 0 * sx + 0 * sy + 0
     o1 = 0 * sx + 0 * sy + 1
@@ -29,6 +30,19 @@ def extrinsic_slab(fpf, shape, i, h, weighted, side, ub, vb, cross2, acc0, acc1)
     o10 = 0 * sx + 0 * sy + -1
     hinvx, hinvy, hinvz = 1.0 / h[0], 1.0 / h[1], 1.0 / h[2]
     v0 = h[0] * h[1] * h[2] / 6.0
+    hx, hy, hz = h[0], h[1], h[2]
+    c2_0 = cross2[0]
+    c2_1 = cross2[1]
+    c2_2 = cross2[2]
+    c2_3 = cross2[3]
+    c2_4 = cross2[4]
+    c2_5 = cross2[5]
+    c2_6 = cross2[6]
+    c2_7 = cross2[7]
+    c2_8 = cross2[8]
+    c2_9 = cross2[9]
+    c2_10 = cross2[10]
+    c2_11 = cross2[11]
     for j in range(shape[1] - 1):
         for k in range(shape[2] - 1):
             base = i * sx + j * sy + k
@@ -85,15 +99,14 @@ def extrinsic_slab(fpf, shape, i, h, weighted, side, ub, vb, cross2, acc0, acc1)
             cy = g0z * g1x - g0x * g1z
             cz = g0x * g1y - g0y * g1x
             psi = math.atan2(math.sqrt(dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz), 1.0 + g0x * g1x + g0y * g1y + g0z * g1z)
-            if dx * side[0, 0] + dy * side[0, 1] + dz * side[0, 2] > 0.0:
+            if dx * hx + dz * hz > 0.0:
                 psi = -psi
-            if weighted:
-                du = f4 - f0
-                dv = f7 - f0
-                mx = du * vb[0, 0] - dv * ub[0, 0]
-                my = du * vb[0, 1] - dv * ub[0, 1]
-                mz = du * vb[0, 2] - dv * ub[0, 2]
-                psi *= 0.5 * math.sqrt(cross2[0] + mx * mx + my * my + mz * mz)
+            du = f4 - f0
+            dv = f7 - f0
+            mx = du * hx - (dv * hx)
+            my = du * hy
+            mz = du * hz
+            psi *= 0.5 * math.sqrt(c2_0 + mx * mx + my * my + mz * mz)
             p0 = psi
             # face 1: corners [0, 6, 7], tetrahedra 0 and 2
             dx, dy, dz = g2x - g0x, g2y - g0y, g2z - g0z
@@ -101,15 +114,14 @@ def extrinsic_slab(fpf, shape, i, h, weighted, side, ub, vb, cross2, acc0, acc1)
             cy = g0z * g2x - g0x * g2z
             cz = g0x * g2y - g0y * g2x
             psi = math.atan2(math.sqrt(dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz), 1.0 + g0x * g2x + g0y * g2y + g0z * g2z)
-            if dx * side[1, 0] + dy * side[1, 1] + dz * side[1, 2] > 0.0:
+            if dy * hy > 0.0:
                 psi = -psi
-            if weighted:
-                du = f6 - f0
-                dv = f7 - f0
-                mx = du * vb[1, 0] - dv * ub[1, 0]
-                my = du * vb[1, 1] - dv * ub[1, 1]
-                mz = du * vb[1, 2] - dv * ub[1, 2]
-                psi *= 0.5 * math.sqrt(cross2[1] + mx * mx + my * my + mz * mz)
+            du = f6 - f0
+            dv = f7 - f0
+            mx = du * hx - (dv * hx)
+            my = du * hy - (dv * hy)
+            mz = du * hz
+            psi *= 0.5 * math.sqrt(c2_1 + mx * mx + my * my + mz * mz)
             p1 = psi
             # face 2: corners [0, 4, 6], tetrahedra 0 and 6
             dx, dy, dz = g6x - g0x, g6y - g0y, g6z - g0z
@@ -117,15 +129,14 @@ def extrinsic_slab(fpf, shape, i, h, weighted, side, ub, vb, cross2, acc0, acc1)
             cy = g0z * g6x - g0x * g6z
             cz = g0x * g6y - g0y * g6x
             psi = math.atan2(math.sqrt(dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz), 1.0 + g0x * g6x + g0y * g6y + g0z * g6z)
-            if dx * side[2, 0] + dy * side[2, 1] + dz * side[2, 2] > 0.0:
+            if -dz * hz > 0.0:
                 psi = -psi
-            if weighted:
-                du = f4 - f0
-                dv = f6 - f0
-                mx = du * vb[2, 0] - dv * ub[2, 0]
-                my = du * vb[2, 1] - dv * ub[2, 1]
-                mz = du * vb[2, 2] - dv * ub[2, 2]
-                psi *= 0.5 * math.sqrt(cross2[2] + mx * mx + my * my + mz * mz)
+            du = f4 - f0
+            dv = f6 - f0
+            mx = du * hx - (dv * hx)
+            my = du * hy
+            mz = 0.0
+            psi *= 0.5 * math.sqrt(c2_2 + mx * mx + my * my + mz * mz)
             p2 = psi if k > 0 else 0.0
             # face 3: corners [0, 5, 7], tetrahedra 1 and 4
             dx, dy, dz = g4x - g1x, g4y - g1y, g4z - g1z
@@ -133,15 +144,14 @@ def extrinsic_slab(fpf, shape, i, h, weighted, side, ub, vb, cross2, acc0, acc1)
             cy = g1z * g4x - g1x * g4z
             cz = g1x * g4y - g1y * g4x
             psi = math.atan2(math.sqrt(dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz), 1.0 + g1x * g4x + g1y * g4y + g1z * g4z)
-            if dx * side[3, 0] + dy * side[3, 1] + dz * side[3, 2] > 0.0:
+            if dz * hz > 0.0:
                 psi = -psi
-            if weighted:
-                du = f5 - f0
-                dv = f7 - f0
-                mx = du * vb[3, 0] - dv * ub[3, 0]
-                my = du * vb[3, 1] - dv * ub[3, 1]
-                mz = du * vb[3, 2] - dv * ub[3, 2]
-                psi *= 0.5 * math.sqrt(cross2[3] + mx * mx + my * my + mz * mz)
+            du = f5 - f0
+            dv = f7 - f0
+            mx = du * hx - (dv * hx)
+            my = du * hy
+            mz = du * hz - (dv * hz)
+            psi *= 0.5 * math.sqrt(c2_3 + mx * mx + my * my + mz * mz)
             p3 = psi
             # face 4: corners [0, 4, 5], tetrahedra 1 and 7
             dx, dy, dz = g7x - g1x, g7y - g1y, g7z - g1z
@@ -149,15 +159,14 @@ def extrinsic_slab(fpf, shape, i, h, weighted, side, ub, vb, cross2, acc0, acc1)
             cy = g1z * g7x - g1x * g7z
             cz = g1x * g7y - g1y * g7x
             psi = math.atan2(math.sqrt(dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz), 1.0 + g1x * g7x + g1y * g7y + g1z * g7z)
-            if dx * side[4, 0] + dy * side[4, 1] + dz * side[4, 2] > 0.0:
+            if -dy * hy > 0.0:
                 psi = -psi
-            if weighted:
-                du = f4 - f0
-                dv = f5 - f0
-                mx = du * vb[4, 0] - dv * ub[4, 0]
-                my = du * vb[4, 1] - dv * ub[4, 1]
-                mz = du * vb[4, 2] - dv * ub[4, 2]
-                psi *= 0.5 * math.sqrt(cross2[4] + mx * mx + my * my + mz * mz)
+            du = f4 - f0
+            dv = f5 - f0
+            mx = du * hx - (dv * hx)
+            my = 0.0
+            mz = du * hz
+            psi *= 0.5 * math.sqrt(c2_4 + mx * mx + my * my + mz * mz)
             p4 = psi if j > 0 else 0.0
             # face 5: corners [0, 2, 7], tetrahedra 2 and 3
             dx, dy, dz = g3x - g2x, g3y - g2y, g3z - g2z
@@ -165,15 +174,14 @@ def extrinsic_slab(fpf, shape, i, h, weighted, side, ub, vb, cross2, acc0, acc1)
             cy = g2z * g3x - g2x * g3z
             cz = g2x * g3y - g2y * g3x
             psi = math.atan2(math.sqrt(dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz), 1.0 + g2x * g3x + g2y * g3y + g2z * g3z)
-            if dx * side[5, 0] + dy * side[5, 1] + dz * side[5, 2] > 0.0:
+            if dy * hy + dz * hz > 0.0:
                 psi = -psi
-            if weighted:
-                du = f2 - f0
-                dv = f7 - f0
-                mx = du * vb[5, 0] - dv * ub[5, 0]
-                my = du * vb[5, 1] - dv * ub[5, 1]
-                mz = du * vb[5, 2] - dv * ub[5, 2]
-                psi *= 0.5 * math.sqrt(cross2[5] + mx * mx + my * my + mz * mz)
+            du = f2 - f0
+            dv = f7 - f0
+            mx = du * hx
+            my = du * hy - (dv * hy)
+            mz = du * hz
+            psi *= 0.5 * math.sqrt(c2_5 + mx * mx + my * my + mz * mz)
             p5 = psi
             # face 6: corners [0, 2, 6], tetrahedra 2 and 8
             dx, dy, dz = g8x - g2x, g8y - g2y, g8z - g2z
@@ -181,15 +189,14 @@ def extrinsic_slab(fpf, shape, i, h, weighted, side, ub, vb, cross2, acc0, acc1)
             cy = g2z * g8x - g2x * g8z
             cz = g2x * g8y - g2y * g8x
             psi = math.atan2(math.sqrt(dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz), 1.0 + g2x * g8x + g2y * g8y + g2z * g8z)
-            if dx * side[6, 0] + dy * side[6, 1] + dz * side[6, 2] > 0.0:
+            if -dz * hz > 0.0:
                 psi = -psi
-            if weighted:
-                du = f2 - f0
-                dv = f6 - f0
-                mx = du * vb[6, 0] - dv * ub[6, 0]
-                my = du * vb[6, 1] - dv * ub[6, 1]
-                mz = du * vb[6, 2] - dv * ub[6, 2]
-                psi *= 0.5 * math.sqrt(cross2[6] + mx * mx + my * my + mz * mz)
+            du = f2 - f0
+            dv = f6 - f0
+            mx = du * hx
+            my = du * hy - (dv * hy)
+            mz = 0.0
+            psi *= 0.5 * math.sqrt(c2_6 + mx * mx + my * my + mz * mz)
             p6 = psi if k > 0 else 0.0
             # face 7: corners [0, 3, 7], tetrahedra 3 and 5
             dx, dy, dz = g5x - g3x, g5y - g3y, g5z - g3z
@@ -197,15 +204,14 @@ def extrinsic_slab(fpf, shape, i, h, weighted, side, ub, vb, cross2, acc0, acc1)
             cy = g3z * g5x - g3x * g5z
             cz = g3x * g5y - g3y * g5x
             psi = math.atan2(math.sqrt(dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz), 1.0 + g3x * g5x + g3y * g5y + g3z * g5z)
-            if dx * side[7, 0] + dy * side[7, 1] + dz * side[7, 2] > 0.0:
+            if dz * hz > 0.0:
                 psi = -psi
-            if weighted:
-                du = f3 - f0
-                dv = f7 - f0
-                mx = du * vb[7, 0] - dv * ub[7, 0]
-                my = du * vb[7, 1] - dv * ub[7, 1]
-                mz = du * vb[7, 2] - dv * ub[7, 2]
-                psi *= 0.5 * math.sqrt(cross2[7] + mx * mx + my * my + mz * mz)
+            du = f3 - f0
+            dv = f7 - f0
+            mx = du * hx
+            my = du * hy - (dv * hy)
+            mz = du * hz - (dv * hz)
+            psi *= 0.5 * math.sqrt(c2_7 + mx * mx + my * my + mz * mz)
             p7 = psi
             # face 8: corners [0, 2, 3], tetrahedra 3 and 9
             dx, dy, dz = g9x - g3x, g9y - g3y, g9z - g3z
@@ -213,15 +219,14 @@ def extrinsic_slab(fpf, shape, i, h, weighted, side, ub, vb, cross2, acc0, acc1)
             cy = g3z * g9x - g3x * g9z
             cz = g3x * g9y - g3y * g9x
             psi = math.atan2(math.sqrt(dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz), 1.0 + g3x * g9x + g3y * g9y + g3z * g9z)
-            if dx * side[8, 0] + dy * side[8, 1] + dz * side[8, 2] > 0.0:
+            if -dx * hx > 0.0:
                 psi = -psi
-            if weighted:
-                du = f2 - f0
-                dv = f3 - f0
-                mx = du * vb[8, 0] - dv * ub[8, 0]
-                my = du * vb[8, 1] - dv * ub[8, 1]
-                mz = du * vb[8, 2] - dv * ub[8, 2]
-                psi *= 0.5 * math.sqrt(cross2[8] + mx * mx + my * my + mz * mz)
+            du = f2 - f0
+            dv = f3 - f0
+            mx = 0.0
+            my = du * hy - (dv * hy)
+            mz = du * hz
+            psi *= 0.5 * math.sqrt(c2_8 + mx * mx + my * my + mz * mz)
             p8 = psi if i > 0 else 0.0
             # face 9: corners [0, 1, 7], tetrahedra 4 and 5
             dx, dy, dz = g5x - g4x, g5y - g4y, g5z - g4z
@@ -229,15 +234,14 @@ def extrinsic_slab(fpf, shape, i, h, weighted, side, ub, vb, cross2, acc0, acc1)
             cy = g4z * g5x - g4x * g5z
             cz = g4x * g5y - g4y * g5x
             psi = math.atan2(math.sqrt(dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz), 1.0 + g4x * g5x + g4y * g5y + g4z * g5z)
-            if dx * side[9, 0] + dy * side[9, 1] + dz * side[9, 2] > 0.0:
+            if dy * hy + dz * hz > 0.0:
                 psi = -psi
-            if weighted:
-                du = f1 - f0
-                dv = f7 - f0
-                mx = du * vb[9, 0] - dv * ub[9, 0]
-                my = du * vb[9, 1] - dv * ub[9, 1]
-                mz = du * vb[9, 2] - dv * ub[9, 2]
-                psi *= 0.5 * math.sqrt(cross2[9] + mx * mx + my * my + mz * mz)
+            du = f1 - f0
+            dv = f7 - f0
+            mx = du * hx
+            my = du * hy
+            mz = du * hz - (dv * hz)
+            psi *= 0.5 * math.sqrt(c2_9 + mx * mx + my * my + mz * mz)
             p9 = psi
             # face 10: corners [0, 1, 5], tetrahedra 4 and 10
             dx, dy, dz = g10x - g4x, g10y - g4y, g10z - g4z
@@ -245,15 +249,14 @@ def extrinsic_slab(fpf, shape, i, h, weighted, side, ub, vb, cross2, acc0, acc1)
             cy = g4z * g10x - g4x * g10z
             cz = g4x * g10y - g4y * g10x
             psi = math.atan2(math.sqrt(dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz), 1.0 + g4x * g10x + g4y * g10y + g4z * g10z)
-            if dx * side[10, 0] + dy * side[10, 1] + dz * side[10, 2] > 0.0:
+            if -dy * hy > 0.0:
                 psi = -psi
-            if weighted:
-                du = f1 - f0
-                dv = f5 - f0
-                mx = du * vb[10, 0] - dv * ub[10, 0]
-                my = du * vb[10, 1] - dv * ub[10, 1]
-                mz = du * vb[10, 2] - dv * ub[10, 2]
-                psi *= 0.5 * math.sqrt(cross2[10] + mx * mx + my * my + mz * mz)
+            du = f1 - f0
+            dv = f5 - f0
+            mx = du * hx
+            my = 0.0
+            mz = du * hz - (dv * hz)
+            psi *= 0.5 * math.sqrt(c2_10 + mx * mx + my * my + mz * mz)
             p10 = psi if j > 0 else 0.0
             # face 11: corners [0, 1, 3], tetrahedra 5 and 11
             dx, dy, dz = g11x - g5x, g11y - g5y, g11z - g5z
@@ -261,15 +264,215 @@ def extrinsic_slab(fpf, shape, i, h, weighted, side, ub, vb, cross2, acc0, acc1)
             cy = g5z * g11x - g5x * g11z
             cz = g5x * g11y - g5y * g11x
             psi = math.atan2(math.sqrt(dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz), 1.0 + g5x * g11x + g5y * g11y + g5z * g11z)
-            if dx * side[11, 0] + dy * side[11, 1] + dz * side[11, 2] > 0.0:
+            if -dx * hx > 0.0:
                 psi = -psi
-            if weighted:
-                du = f1 - f0
-                dv = f3 - f0
-                mx = du * vb[11, 0] - dv * ub[11, 0]
-                my = du * vb[11, 1] - dv * ub[11, 1]
-                mz = du * vb[11, 2] - dv * ub[11, 2]
-                psi *= 0.5 * math.sqrt(cross2[11] + mx * mx + my * my + mz * mz)
+            du = f1 - f0
+            dv = f3 - f0
+            mx = 0.0
+            my = du * hy
+            mz = du * hz - (dv * hz)
+            psi *= 0.5 * math.sqrt(c2_11 + mx * mx + my * my + mz * mz)
+            p11 = psi if i > 0 else 0.0
+            w0 = 0.25 * v0 * math.sqrt(1.0 + g0x * g0x + g0y * g0y + g0z * g0z)
+            w1 = 0.25 * v0 * math.sqrt(1.0 + g1x * g1x + g1y * g1y + g1z * g1z)
+            w2 = 0.25 * v0 * math.sqrt(1.0 + g2x * g2x + g2y * g2y + g2z * g2z)
+            w3 = 0.25 * v0 * math.sqrt(1.0 + g3x * g3x + g3y * g3y + g3z * g3z)
+            w4 = 0.25 * v0 * math.sqrt(1.0 + g4x * g4x + g4y * g4y + g4z * g4z)
+            w5 = 0.25 * v0 * math.sqrt(1.0 + g5x * g5x + g5y * g5y + g5z * g5z)
+            acc0[base + o0] += p0 + p1 + p2 + p3 + p4 + p5 + p6 + p7 + p8 + p9 + p10 + p11
+            acc1[base + o0] += w0 + w1 + w2 + w3 + w4 + w5
+            acc0[base + o1] += p9 + p10 + p11
+            acc1[base + o1] += w4 + w5
+            acc0[base + o2] += p5 + p6 + p8
+            acc1[base + o2] += w2 + w3
+            acc0[base + o3] += p7 + p8 + p11
+            acc1[base + o3] += w3 + w5
+            acc0[base + o4] += p0 + p2 + p4
+            acc1[base + o4] += w0 + w1
+            acc0[base + o5] += p3 + p4 + p10
+            acc1[base + o5] += w1 + w4
+            acc0[base + o6] += p1 + p2 + p6
+            acc1[base + o6] += w0 + w2
+            acc0[base + o7] += p0 + p1 + p3 + p5 + p7 + p9
+            acc1[base + o7] += w0 + w1 + w2 + w3 + w4 + w5
+
+
+@numba.njit(cache=True, nogil=True)
+def unweighted_slab(fpf, shape, i, h, cross2, acc0, acc1):
+    """sum psi into acc0, sum |sigma|/4 into acc1. cross2[f] is |u_b x v_b|^2 of face
+    f's base edges (spacing folded in)."""
+    sx, sy = shape[1] * shape[2], shape[2]
+    o0 = 0 * sx + 0 * sy + 0
+    o1 = 0 * sx + 0 * sy + 1
+    o2 = 0 * sx + 1 * sy + 0
+    o3 = 0 * sx + 1 * sy + 1
+    o4 = 1 * sx + 0 * sy + 0
+    o5 = 1 * sx + 0 * sy + 1
+    o6 = 1 * sx + 1 * sy + 0
+    o7 = 1 * sx + 1 * sy + 1
+    o8 = -1 * sx + 0 * sy + 0
+    o9 = 0 * sx + -1 * sy + 0
+    o10 = 0 * sx + 0 * sy + -1
+    hinvx, hinvy, hinvz = 1.0 / h[0], 1.0 / h[1], 1.0 / h[2]
+    v0 = h[0] * h[1] * h[2] / 6.0
+    hx, hy, hz = h[0], h[1], h[2]
+    for j in range(shape[1] - 1):
+        for k in range(shape[2] - 1):
+            base = i * sx + j * sy + k
+            f0 = fpf[base + o0]
+            f1 = fpf[base + o1]
+            f2 = fpf[base + o2]
+            f3 = fpf[base + o3]
+            f4 = fpf[base + o4]
+            f5 = fpf[base + o5]
+            f6 = fpf[base + o6]
+            f7 = fpf[base + o7]
+            f8 = fpf[base + o8] if i > 0 else f0
+            f9 = fpf[base + o9] if j > 0 else f0
+            f10 = fpf[base + o10] if k > 0 else f0
+            g0x = (f4 - f0) * hinvx
+            g0y = (f6 - f4) * hinvy
+            g0z = (f7 - f6) * hinvz
+            g1x = (f4 - f0) * hinvx
+            g1z = (f5 - f4) * hinvz
+            g1y = (f7 - f5) * hinvy
+            g2y = (f2 - f0) * hinvy
+            g2x = (f6 - f2) * hinvx
+            g2z = (f7 - f6) * hinvz
+            g3y = (f2 - f0) * hinvy
+            g3z = (f3 - f2) * hinvz
+            g3x = (f7 - f3) * hinvx
+            g4z = (f1 - f0) * hinvz
+            g4x = (f5 - f1) * hinvx
+            g4y = (f7 - f5) * hinvy
+            g5z = (f1 - f0) * hinvz
+            g5y = (f3 - f1) * hinvy
+            g5x = (f7 - f3) * hinvx
+            g6z = (f0 - f10) * hinvz
+            g6x = (f4 - f0) * hinvx
+            g6y = (f6 - f4) * hinvy
+            g7y = (f0 - f9) * hinvy
+            g7x = (f4 - f0) * hinvx
+            g7z = (f5 - f4) * hinvz
+            g8z = (f0 - f10) * hinvz
+            g8y = (f2 - f0) * hinvy
+            g8x = (f6 - f2) * hinvx
+            g9x = (f0 - f8) * hinvx
+            g9y = (f2 - f0) * hinvy
+            g9z = (f3 - f2) * hinvz
+            g10y = (f0 - f9) * hinvy
+            g10z = (f1 - f0) * hinvz
+            g10x = (f5 - f1) * hinvx
+            g11x = (f0 - f8) * hinvx
+            g11z = (f1 - f0) * hinvz
+            g11y = (f3 - f1) * hinvy
+            # face 0: corners [0, 4, 7], tetrahedra 0 and 1
+            dx, dy, dz = g1x - g0x, g1y - g0y, g1z - g0z
+            cx = g0y * g1z - g0z * g1y
+            cy = g0z * g1x - g0x * g1z
+            cz = g0x * g1y - g0y * g1x
+            psi = math.atan2(math.sqrt(dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz), 1.0 + g0x * g1x + g0y * g1y + g0z * g1z)
+            if dx * hx + dz * hz > 0.0:
+                psi = -psi
+            p0 = psi
+            # face 1: corners [0, 6, 7], tetrahedra 0 and 2
+            dx, dy, dz = g2x - g0x, g2y - g0y, g2z - g0z
+            cx = g0y * g2z - g0z * g2y
+            cy = g0z * g2x - g0x * g2z
+            cz = g0x * g2y - g0y * g2x
+            psi = math.atan2(math.sqrt(dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz), 1.0 + g0x * g2x + g0y * g2y + g0z * g2z)
+            if dy * hy > 0.0:
+                psi = -psi
+            p1 = psi
+            # face 2: corners [0, 4, 6], tetrahedra 0 and 6
+            dx, dy, dz = g6x - g0x, g6y - g0y, g6z - g0z
+            cx = g0y * g6z - g0z * g6y
+            cy = g0z * g6x - g0x * g6z
+            cz = g0x * g6y - g0y * g6x
+            psi = math.atan2(math.sqrt(dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz), 1.0 + g0x * g6x + g0y * g6y + g0z * g6z)
+            if -dz * hz > 0.0:
+                psi = -psi
+            p2 = psi if k > 0 else 0.0
+            # face 3: corners [0, 5, 7], tetrahedra 1 and 4
+            dx, dy, dz = g4x - g1x, g4y - g1y, g4z - g1z
+            cx = g1y * g4z - g1z * g4y
+            cy = g1z * g4x - g1x * g4z
+            cz = g1x * g4y - g1y * g4x
+            psi = math.atan2(math.sqrt(dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz), 1.0 + g1x * g4x + g1y * g4y + g1z * g4z)
+            if dz * hz > 0.0:
+                psi = -psi
+            p3 = psi
+            # face 4: corners [0, 4, 5], tetrahedra 1 and 7
+            dx, dy, dz = g7x - g1x, g7y - g1y, g7z - g1z
+            cx = g1y * g7z - g1z * g7y
+            cy = g1z * g7x - g1x * g7z
+            cz = g1x * g7y - g1y * g7x
+            psi = math.atan2(math.sqrt(dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz), 1.0 + g1x * g7x + g1y * g7y + g1z * g7z)
+            if -dy * hy > 0.0:
+                psi = -psi
+            p4 = psi if j > 0 else 0.0
+            # face 5: corners [0, 2, 7], tetrahedra 2 and 3
+            dx, dy, dz = g3x - g2x, g3y - g2y, g3z - g2z
+            cx = g2y * g3z - g2z * g3y
+            cy = g2z * g3x - g2x * g3z
+            cz = g2x * g3y - g2y * g3x
+            psi = math.atan2(math.sqrt(dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz), 1.0 + g2x * g3x + g2y * g3y + g2z * g3z)
+            if dy * hy + dz * hz > 0.0:
+                psi = -psi
+            p5 = psi
+            # face 6: corners [0, 2, 6], tetrahedra 2 and 8
+            dx, dy, dz = g8x - g2x, g8y - g2y, g8z - g2z
+            cx = g2y * g8z - g2z * g8y
+            cy = g2z * g8x - g2x * g8z
+            cz = g2x * g8y - g2y * g8x
+            psi = math.atan2(math.sqrt(dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz), 1.0 + g2x * g8x + g2y * g8y + g2z * g8z)
+            if -dz * hz > 0.0:
+                psi = -psi
+            p6 = psi if k > 0 else 0.0
+            # face 7: corners [0, 3, 7], tetrahedra 3 and 5
+            dx, dy, dz = g5x - g3x, g5y - g3y, g5z - g3z
+            cx = g3y * g5z - g3z * g5y
+            cy = g3z * g5x - g3x * g5z
+            cz = g3x * g5y - g3y * g5x
+            psi = math.atan2(math.sqrt(dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz), 1.0 + g3x * g5x + g3y * g5y + g3z * g5z)
+            if dz * hz > 0.0:
+                psi = -psi
+            p7 = psi
+            # face 8: corners [0, 2, 3], tetrahedra 3 and 9
+            dx, dy, dz = g9x - g3x, g9y - g3y, g9z - g3z
+            cx = g3y * g9z - g3z * g9y
+            cy = g3z * g9x - g3x * g9z
+            cz = g3x * g9y - g3y * g9x
+            psi = math.atan2(math.sqrt(dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz), 1.0 + g3x * g9x + g3y * g9y + g3z * g9z)
+            if -dx * hx > 0.0:
+                psi = -psi
+            p8 = psi if i > 0 else 0.0
+            # face 9: corners [0, 1, 7], tetrahedra 4 and 5
+            dx, dy, dz = g5x - g4x, g5y - g4y, g5z - g4z
+            cx = g4y * g5z - g4z * g5y
+            cy = g4z * g5x - g4x * g5z
+            cz = g4x * g5y - g4y * g5x
+            psi = math.atan2(math.sqrt(dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz), 1.0 + g4x * g5x + g4y * g5y + g4z * g5z)
+            if dy * hy + dz * hz > 0.0:
+                psi = -psi
+            p9 = psi
+            # face 10: corners [0, 1, 5], tetrahedra 4 and 10
+            dx, dy, dz = g10x - g4x, g10y - g4y, g10z - g4z
+            cx = g4y * g10z - g4z * g10y
+            cy = g4z * g10x - g4x * g10z
+            cz = g4x * g10y - g4y * g10x
+            psi = math.atan2(math.sqrt(dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz), 1.0 + g4x * g10x + g4y * g10y + g4z * g10z)
+            if -dy * hy > 0.0:
+                psi = -psi
+            p10 = psi if j > 0 else 0.0
+            # face 11: corners [0, 1, 3], tetrahedra 5 and 11
+            dx, dy, dz = g11x - g5x, g11y - g5y, g11z - g5z
+            cx = g5y * g11z - g5z * g11y
+            cy = g5z * g11x - g5x * g11z
+            cz = g5x * g11y - g5y * g11x
+            psi = math.atan2(math.sqrt(dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz), 1.0 + g5x * g11x + g5y * g11y + g5z * g11z)
+            if -dx * hx > 0.0:
+                psi = -psi
             p11 = psi if i > 0 else 0.0
             w0 = 0.25 * v0 * math.sqrt(1.0 + g0x * g0x + g0y * g0y + g0z * g0z)
             w1 = 0.25 * v0 * math.sqrt(1.0 + g1x * g1x + g1y * g1y + g1z * g1z)

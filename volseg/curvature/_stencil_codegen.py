@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ._grid import _AXES, _FACE_IDX, _FACE_TETS, _OFFSETS, _PATH_IDX
+from ._grid import _AXES, _FACE_FAR, _FACE_IDX, _FACE_TETS, _OFFSETS, _PATH_IDX
 
 TARGET = Path(__file__).with_name("_grid_stencil.py")
 XYZ = "xyz"
@@ -59,11 +59,28 @@ def _offsets(lines, indent):
     lines.append(f"{pad}v0 = h[0] * h[1] * h[2] / 6.0")
 
 
-def _extrinsic():
+def _scaled(terms):
+    """Sum of (value, offset difference, axis) terms with the difference's sign folded in:
+    a difference of +-1 times h is exact, so this equals the table-driven product."""
+    out = []
+    for value, step, axis in terms:
+        if step:
+            out.append(("- " if step < 0 else "+ ") + f"{value} * h{XYZ[axis]}")
+    text = " ".join(out) or "0.0"
+    return text[2:] if text.startswith("+ ") else "-" + text[2:] if text.startswith("- ") else text
+
+
+def _extrinsic(weighted):
+    name = "weighted_slab" if weighted else "unweighted_slab"
+    what = "sum psi |tau|" if weighted else "sum psi"
     lines = ["", "", "@numba.njit(cache=True, nogil=True)",
-             "def extrinsic_slab(fpf, shape, i, h, weighted, side, ub, vb, cross2, acc0, acc1):",
-             '    """sum psi (|tau|-weighted if `weighted`) into acc0, sum |sigma|/4 into acc1."""']
+             f"def {name}(fpf, shape, i, h, cross2, acc0, acc1):",
+             f'    """{what} into acc0, sum |sigma|/4 into acc1. cross2[f] is |u_b x v_b|^2 of face',
+             '    f\'s base edges (spacing folded in)."""']
     _offsets(lines, 4)
+    lines.append("    hx, hy, hz = h[0], h[1], h[2]")
+    if weighted:
+        lines += [f"    c2_{fi} = cross2[{fi}]" for fi in range(12)]
     lines += ["    for j in range(shape[1] - 1):", "        for k in range(shape[2] - 1):",
               "            base = i * sx + j * sy + k"]
     _load(lines, 12)
@@ -71,26 +88,33 @@ def _extrinsic():
     corners = {c: [] for c in range(8)}
     for fi in range(12):
         ta, tb = _FACE_TETS[fi]
+        q0, q1, q2 = (int(q) for q in _FACE_IDX[fi])
+        d1 = _OFFSETS[q1] - _OFFSETS[q0]
+        d2 = _OFFSETS[q2] - _OFFSETS[q0]
+        ds = _OFFSETS[_FACE_FAR[fi]] - _OFFSETS[q0]
         ga = [f"g{ta}{a}" for a in XYZ]
         gb = [f"g{tb}{a}" for a in XYZ]
+        side = _scaled([(f"d{XYZ[a]}", int(ds[a]), a) for a in range(3)])
         lines += [
-            f"{pad}# face {fi}: corners {_FACE_IDX[fi].tolist()}, tetrahedra {ta} and {tb}",
+            f"{pad}# face {fi}: corners {[q0, q1, q2]}, tetrahedra {ta} and {tb}",
             f"{pad}dx, dy, dz = {gb[0]} - {ga[0]}, {gb[1]} - {ga[1]}, {gb[2]} - {ga[2]}",
             f"{pad}cx = {ga[1]} * {gb[2]} - {ga[2]} * {gb[1]}",
             f"{pad}cy = {ga[2]} * {gb[0]} - {ga[0]} * {gb[2]}",
             f"{pad}cz = {ga[0]} * {gb[1]} - {ga[1]} * {gb[0]}",
             f"{pad}psi = math.atan2(math.sqrt(dx * dx + dy * dy + dz * dz + cx * cx + cy * cy"
             f" + cz * cz), 1.0 + {ga[0]} * {gb[0]} + {ga[1]} * {gb[1]} + {ga[2]} * {gb[2]})",
-            f"{pad}if dx * side[{fi}, 0] + dy * side[{fi}, 1] + dz * side[{fi}, 2] > 0.0:",
+            f"{pad}if {side} > 0.0:",
             f"{pad}    psi = -psi",
-            f"{pad}if weighted:",
-            f"{pad}    du = f{_FACE_IDX[fi, 1]} - f{_FACE_IDX[fi, 0]}",
-            f"{pad}    dv = f{_FACE_IDX[fi, 2]} - f{_FACE_IDX[fi, 0]}",
-            f"{pad}    mx = du * vb[{fi}, 0] - dv * ub[{fi}, 0]",
-            f"{pad}    my = du * vb[{fi}, 1] - dv * ub[{fi}, 1]",
-            f"{pad}    mz = du * vb[{fi}, 2] - dv * ub[{fi}, 2]",
-            f"{pad}    psi *= 0.5 * math.sqrt(cross2[{fi}] + mx * mx + my * my + mz * mz)",
         ]
+        if weighted:
+            # m = du v_b - dv u_b with u_b = d1 h, v_b = d2 h (|u ^ v|^2 = |u_b x v_b|^2 + |m|^2)
+            lines += [f"{pad}du = f{q1} - f{q0}", f"{pad}dv = f{q2} - f{q0}"]
+            for a in range(3):
+                m = _scaled([("du", int(d2[a]), a)]) if d2[a] else None
+                n = _scaled([("dv", int(d1[a]), a)]) if d1[a] else None
+                expr = (f"{m} - ({n})" if m and n else m if m else f"-({n})" if n else "0.0")
+                lines.append(f"{pad}m{XYZ[a]} = {expr}")
+            lines.append(f"{pad}psi *= 0.5 * math.sqrt(c2_{fi} + mx * mx + my * my + mz * mz)")
         if tb >= 6:  # the neighbour cube below along this axis must exist
             lines.append(f"{pad}p{fi} = psi if {'ijk'[_AXES[tb, 0]]} > 0 else 0.0")
         else:
@@ -157,7 +181,8 @@ def _laplace_beltrami():
 
 
 def source() -> str:
-    return "\n".join([HEADER.rstrip("\n"), *_extrinsic(), *_laplace_beltrami()]) + "\n"
+    return "\n".join([HEADER.rstrip("\n"), *_extrinsic(True), *_extrinsic(False),
+                      *_laplace_beltrami()]) + "\n"
 
 
 if __name__ == "__main__":
