@@ -7,7 +7,7 @@ Grid curvature (weighted, Laplace-Beltrami) at each size: the base revision's ke
 (a temporary git worktree), today's, and the floor kernel (`_floor.py`, the weighted
 operator's unavoidable arithmetic): voxels/s, today/base, and the fraction of the
 floor's speed reached. Then bytes per voxel beyond the input at 256^3 for both
-kernels, and the Morse build (on the weighted curvature of the same field) for the
+kernels (peak RSS of a fresh process that only loaded the input from .npy), and the Morse build (on the weighted curvature of the same field) for the
 base and today, with today's time per phase. Every figure comes from a fresh
 interpreter after a warm-up call (numba compile and cache load are not timed); best
 of --repeat; base and today alternate.
@@ -59,16 +59,21 @@ print(json.dumps(dict(t=best(lambda: floor_kernel(fp, np.ones(3)), {repeat}))))
 """
 
 MEMORY = SETUP + """
-data = field({n})
-field_ = grid_curvature(data, "weighted") if {what!r} == "morse" else None
-grid_curvature(warm, "weighted"); descending_complex(warm)
-import gc; gc.collect()
+data = np.load({path!r})  # made by the parent: nothing else has touched this process's peak
+grid_curvature(warm, "weighted"); grid_curvature(warm, "laplace_beltrami"); descending_complex(warm)
 before = rss()
 if {what!r} == "morse":
-    h = descending_complex(field_)
+    h = descending_complex(data)
 else:
     c = grid_curvature(data, {what!r})
 print(json.dumps(dict(extra=(rss() - before) / data.size)))
+"""
+
+INPUTS = SETUP + """
+data = field({n})
+np.save({volume!r}, data)
+np.save({curvature!r}, grid_curvature(data, "weighted"))
+print(json.dumps(dict()))
 """
 
 MORSE = SETUP + """
@@ -115,9 +120,12 @@ def main():
                     print(f"{op:16s} {n}^3: base {old:7.3f} s, now {new:7.3f} s "
                           f"({n**3 / new / 1e6:5.2f} M voxels/s): {old / new:4.2f}x faster, "
                           f"{floor / new:4.0%} of the floor's speed", flush=True)
+            volume, curvature = Path(tmp) / "volume.npy", Path(tmp) / "curvature.npy"
+            run(INPUTS, ROOT, n=256, volume=str(volume), curvature=str(curvature))
             for what in ["weighted", "laplace_beltrami", "morse"]:
-                old = run(MEMORY, base, n=256, what=what)["extra"]
-                new = run(MEMORY, ROOT, n=256, what=what)["extra"]
+                path = str(curvature if what == "morse" else volume)
+                old = run(MEMORY, base, what=what, path=path)["extra"]
+                new = run(MEMORY, ROOT, what=what, path=path)["extra"]
                 print(f"memory {what:16s} 256^3: base {old:5.1f}, now {new:5.1f} bytes/voxel "
                       "beyond the input", flush=True)
             for n in args.morse:

@@ -262,3 +262,98 @@ def break_ties(order, ranked, saddle, edge_a, edge_b):
                     j -= 1
                 order[j + 1] = item
         start = stop
+
+
+@numba.njit(cache=True, nogil=True)
+def group_by_cell(vertices, cell, n_cells, starts, members):
+    """Counting sort of the vertices by cell: members[starts[c]:starts[c + 1]] are cell
+    c's vertices, in increasing order."""
+    for c in range(n_cells + 1):
+        starts[c] = 0
+    for n in range(len(vertices)):
+        starts[cell[vertices[n]] + 1] += 1
+    for c in range(n_cells):
+        starts[c + 1] += starts[c]
+    fill = starts[:-1].copy()
+    for n in range(len(vertices)):
+        v = vertices[n]
+        c = cell[v]
+        members[fill[c]] = v
+        fill[c] += 1
+
+
+@numba.njit(cache=True, nogil=True)
+def _pairs_of_cells(values, members, starts, visit, lo, hi, grid, offsets, indptr, indices,
+                    cell, degree, out_a, out_b, out_v, start, capacity, table, part_b, part_v,
+                    part_slot):
+    """Unique cell pairs (a, b), a in visit[lo:hi] and b > a, each with its highest saddle.
+
+    For every vertex of cell a and every neighbour u in a cell b > a, the edge's saddle
+    is its lower end. a's partners are found through a small open-addressing table
+    (`table[slot]` = 1 + index into part_*, 0 if free) sized for a's vertex count, so
+    it stays in cache; only the slots a used are cleared afterwards. An edge between
+    two cells is seen from the smaller cell only. Writes the first `capacity` pairs
+    from out_*[start]; returns how many there were.
+    """
+    n = 0
+    n_cells = len(starts) - 1
+    for p in range(lo, hi):
+        a = visit[p]
+        bound = min(degree * (starts[a + 1] - starts[a]), n_cells)
+        size = 16
+        while size < 2 * bound:
+            size *= 2
+        mask = size - 1
+        m = 0
+        for idx in range(starts[a], starts[a + 1]):
+            v = members[idx]
+            count = len(offsets) if grid else indptr[v + 1] - indptr[v]
+            for t in range(count):
+                u = v + offsets[t] if grid else indices[indptr[v] + t]
+                b = cell[u]
+                if b <= a:  # the same cell, a smaller one (seen from there), or off the vertices
+                    continue
+                low = u if _higher(values, v, u) else v
+                slot = (b * 2654435761) & mask
+                while True:
+                    k = table[slot]
+                    if k == 0:
+                        table[slot] = m + 1
+                        part_b[m] = b
+                        part_v[m] = low
+                        part_slot[m] = slot
+                        m += 1
+                        break
+                    if part_b[k - 1] == b:
+                        if _higher(values, low, part_v[k - 1]):
+                            part_v[k - 1] = low
+                        break
+                    slot = (slot + 1) & mask
+        for q in range(m):
+            table[part_slot[q]] = 0
+            if n < capacity:
+                out_a[start + n] = a
+                out_b[start + n] = part_b[q]
+                out_v[start + n] = part_v[q]
+            n += 1
+    return n
+
+
+@numba.njit(cache=True, parallel=True)
+def cell_pairs(values, members, starts, visit, bounds, chunks, grid, offsets, indptr, indices,
+               cell, degree, table_sizes, out_a, out_b, out_v, out_starts, capacity, counts):
+    """`_pairs_of_cells` over cells visit[bounds[c]:bounds[c + 1]] for c in `chunks`, in
+    parallel (one partner table per chunk, `table_sizes[c]` slots: room for the largest
+    cell's bound). Chunking is fixed, so the output does not depend on the thread
+    count; the caller reruns the chunks that overflowed."""
+    for i in numba.prange(len(chunks)):
+        c = chunks[i]
+        room = table_sizes[c] // 2
+        table = np.zeros(table_sizes[c], dtype=np.int32)
+        part_b = np.empty(room, dtype=cell.dtype)
+        part_v = np.empty(room, dtype=members.dtype)
+        part_slot = np.empty(room, dtype=np.int64)
+        counts[i] = _pairs_of_cells(values, members, starts, visit, bounds[c], bounds[c + 1],
+                                    grid, offsets, indptr, indices, cell, degree, out_a, out_b,
+                                    out_v, out_starts[i], capacity[i], table, part_b, part_v,
+                                    part_slot)

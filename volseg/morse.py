@@ -147,51 +147,70 @@ def _csr_adjacency(adjacency, n_vertices):
     return indptr, key % n_vertices
 
 
-#: Vertices per chunk of the cross-edge pass (a few x-slabs at 256^3).
-_CHUNK_VERTICES = 1 << 18
+#: Vertices per chunk of the cross-edge pass (chunks are ranges of cells).
+_CHUNK_VERTICES = 1 << 20
 
 
-def _cross_edges(kernels, flat, real, grid, offsets, indptr, indices, cell):
-    """(a, b, saddle) of the cross-cell edges, one compiled pass in fixed chunks.
+def _cross_edges(kernels, flat, real, grid, offsets, indptr, indices, cell, n_cells):
+    """(a, b, saddle) of every pair of adjacent cells, a < b, with its highest saddle.
 
-    Chunks of about 2^18 vertices (a few x-slabs, so that most cells lie in one chunk
-    and the per-chunk table removes most duplicate pairs). Each chunk gets room for
-    one edge per two vertices (smooth fields need about 0.4); the chunks that
-    overflow (noisy fields) are rerun together with exact room. On a grid only the
-    positive half of the offsets is walked: each edge once, from its smaller node.
+    The vertices are grouped by cell (a counting sort), then each cell's edges to
+    cells with a larger id are reduced to one per partner: exactly one edge per pair,
+    which is all the elder-rule union-find needs (a lower edge of a pair can never
+    join two components). Cells are walked in the order of their first vertex (so
+    the walk moves through memory), in chunks of about `_CHUNK_VERTICES` vertices run
+    in parallel; each chunk gets room for 16 pairs per cell plus one per 4 vertices
+    (quantized fields need about 8 per cell), and the chunks that overflow are rerun
+    with exact room.
     """
-    if grid:
-        offsets = np.ascontiguousarray(offsets[offsets > 0])
-    n_chunks = max(1, -(-len(real) // _CHUNK_VERTICES))
-    bounds = np.linspace(0, len(real), n_chunks + 1).astype(np.int64)
+    starts = np.empty(n_cells + 1, dtype=np.int64)
+    members = np.empty(len(real), dtype=real.dtype)
+    kernels.group_by_cell(real, cell, n_cells, starts, members)
+    # Cells in the order of their first vertex, so that the walk moves through memory.
+    visit = np.argsort(members[starts[:-1]], kind="stable").astype(np.int64)
+    counts_in_order = np.diff(starts)[visit]
+    n_chunks = max(1, min(256, -(-len(real) // _CHUNK_VERTICES)))
+    bounds = np.searchsorted(np.cumsum(counts_in_order),
+                             np.linspace(0, len(real), n_chunks + 1)[1:], side="left") + 1
+    bounds = np.minimum(np.concatenate([[0], bounds]), n_cells).astype(np.int64)
+    bounds[-1] = n_cells
     chunks = np.arange(n_chunks, dtype=np.int64)
-    capacity = (bounds[1:] - bounds[:-1]) // 2 + 64
-    out, starts, counts = _edge_pass(kernels, flat, real, bounds, chunks, capacity, grid,
-                                     offsets, indptr, indices, cell)
+    cells_in = np.diff(bounds)
+    vertices_in = np.add.reduceat(counts_in_order, np.minimum(bounds[:-1], n_cells - 1))
+    vertices_in[cells_in == 0] = 0
+    capacity = 16 * cells_in + vertices_in // 4 + 1024
+    degree = len(offsets) if grid else int(np.diff(indptr).max(initial=0))
+    # Partner table per chunk: twice the largest partner bound of its cells, a power of 2.
+    sizes = np.minimum(degree * counts_in_order, n_cells)
+    largest = np.maximum.reduceat(sizes, np.minimum(bounds[:-1], n_cells - 1))
+    largest[cells_in == 0] = 0  # empty chunks (reduceat gives them a neighbour's)
+    table_sizes = np.maximum(16, 2 ** np.ceil(np.log2(np.maximum(2 * largest, 1)))).astype(np.int64)
+    args = (flat, members, starts, visit, bounds, grid, offsets, indptr, indices, cell, degree,
+            table_sizes)
+    out, out_starts, counts = _pair_pass(kernels, args, chunks, capacity)
     over = np.flatnonzero(counts > capacity)
     if len(over):
-        room, room_starts, _ = _edge_pass(kernels, flat, real, bounds, over, counts[over],
-                                          grid, offsets, indptr, indices, cell)
+        room, room_starts, _ = _pair_pass(kernels, args, over, counts[over])
     pieces = []
     for c in range(n_chunks):
         if counts[c] <= capacity[c]:
-            pieces.append([arr[starts[c]:starts[c] + counts[c]] for arr in out])
+            pieces.append([arr[out_starts[c]:out_starts[c] + counts[c]] for arr in out])
         else:
             k = int(np.searchsorted(over, c))
             pieces.append([arr[room_starts[k]:room_starts[k] + counts[c]] for arr in room])
     return tuple(np.concatenate([p[k] for p in pieces]) for k in range(3))
 
 
-def _edge_pass(kernels, flat, real, bounds, chunks, capacity, grid, offsets, indptr,
-               indices, cell):
-    starts = np.concatenate([[0], np.cumsum(capacity)[:-1]]).astype(np.int64)
+def _pair_pass(kernels, args, chunks, capacity):
+    flat, members, starts, visit, bounds, grid, offsets, indptr, indices, cell, degree, sizes = args
+    out_starts = np.concatenate([[0], np.cumsum(capacity)[:-1]]).astype(np.int64)
     counts = np.zeros(len(chunks), dtype=np.int64)
     total = int(capacity.sum())
-    out = [np.empty(total, dtype=np.int32), np.empty(total, dtype=np.int32),
-           np.empty(total, dtype=np.int64)]
-    kernels.cross_edges(flat, real, bounds, chunks, grid, offsets, indptr, indices, cell,
-                        *out, starts, capacity.astype(np.int64), counts)
-    return out, starts, counts
+    out = [np.empty(total, dtype=cell.dtype), np.empty(total, dtype=cell.dtype),
+           np.empty(total, dtype=members.dtype)]
+    kernels.cell_pairs(flat, members, starts, visit, bounds, chunks, grid, offsets, indptr,
+                       indices, cell, degree, sizes, *out, out_starts, capacity.astype(np.int64), counts)
+    return out, out_starts, counts
 
 
 def _saddle_order(flat, saddle, edge_a, edge_b):
@@ -339,7 +358,8 @@ def _merge_events(kernels, graph: _Neighbourhood, cell, n_maxima,
     """Cross-cell edges gathered in memory order (parallel, cache-friendly) with a
     per-pair dedup, then one Kruskal over them by decreasing saddle (value, index)."""
     edge_a, edge_b, edge_v = _cross_edges(kernels, graph.values, graph.vertices, graph.grid,
-                                          graph.offsets, graph.indptr, graph.indices, cell)
+                                          graph.offsets, graph.indptr, graph.indices, cell,
+                                          n_maxima)
     phases.done("cross-cell edges")
     order = _saddle_order(graph.values, edge_v, edge_a, edge_b)
     phases.done("saddle order (sort, ties)")
