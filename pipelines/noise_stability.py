@@ -37,6 +37,8 @@ from pathlib import Path
 
 import numpy as np
 
+from volseg.cli import UsageError
+from volseg.segment import DEFAULT_REGIONS
 from volseg.curvature import REGISTRY, cli_choices, normalize_operator
 
 from ._output import save_figure, write_csv
@@ -50,10 +52,6 @@ KEY_COLUMNS = ("dataset", "checksum", "operator", "regions", "cut", "mask", "lev
 MASKS = ("none", "auto")
 CUTS = ("threshold", "regions")
 DB_NAME = "results.sqlite"
-
-
-class UsageError(ValueError):
-    """Bad input or usage: exit code 2."""
 
 
 # ---------------------------------------------------------------- the task itself
@@ -241,7 +239,7 @@ class _Progress:
 
 
 def run(datasets, out_dir, *, operators=DEFAULT_OPERATORS, levels=DEFAULT_LEVELS,
-        seeds=DEFAULT_SEEDS, regions=30, cut="threshold", mask="none", scheduler=None,
+        seeds=DEFAULT_SEEDS, regions=DEFAULT_REGIONS, cut="threshold", mask="none", scheduler=None,
         workers=None,
         say=lambda message: None) -> dict:
     """Run (or resume) the tasks not yet done; returns counts of what happened.
@@ -449,7 +447,7 @@ def _parser():
     p.add_argument("--levels", nargs="+", type=float, default=list(DEFAULT_LEVELS),
                    metavar="PERCENT", help="noise sigma in %% of the value range")
     p.add_argument("--seeds", type=int, default=DEFAULT_SEEDS, help="seeds per level")
-    p.add_argument("--regions", type=int, default=30,
+    p.add_argument("--regions", type=int, default=DEFAULT_REGIONS,
                    help="regions of the clean segmentation that fix the threshold")
     p.add_argument("--cut", choices=CUTS, default="threshold",
                    help="threshold: hold the clean threshold (the paper); regions: cut "

@@ -1,8 +1,9 @@
 """Descending Morse complex of a vertex field, simplified hierarchically by persistence.
 
-Stands alone: of volseg it imports only its compiled kernels (`volseg._morse_kernels`)
-and the Kuhn leaf module (`volseg._kuhn`, the grid neighbourhood); otherwise numpy,
-scipy and numba, networkx only for graph input and `region_adjacency`. DESIGN.md section 5 is the contract:
+Stands alone: of volseg it imports only its compiled kernels
+(`volseg._morse_kernels`) and the Kuhn leaf module (`volseg._kuhn`, the grid
+neighbourhood); otherwise numpy, scipy and numba, networkx only for graph input and
+`region_adjacency`. DESIGN.md section 5 is the contract:
 
 - order: simulation of simplicity, u is higher than v when (f(u), u) > (f(v), v),
   so every result is deterministic and plateaus need no special case;

@@ -11,8 +11,11 @@ import numpy as np
 
 
 def weighted(acc, inner, h):
-    # sum psi |tau| / (n^2 |p|) with n = 3 and |p| = acc[1] (a quarter of each star volume)
-    return acc[0][inner] / (9.0 * acc[1][inner])
+    # sum psi |tau| / (n^2 |p|) with n = 3 and |p| = acc[1] (a quarter of each star volume);
+    # in place, so that the peak stays at the accumulator plus the output
+    star = acc[1][inner]
+    star *= 9.0
+    return np.divide(acc[0][inner], star)
 
 
 def unweighted(acc, inner, h):
