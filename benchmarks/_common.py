@@ -1,10 +1,13 @@
 """Helpers for the side-by-side benchmarks (run by hand, not by CI)."""
 
+import contextlib
 import json
 import resource
 import subprocess
 import sys
+import tempfile
 import time
+from pathlib import Path
 
 
 def peak_rss_mb():
@@ -25,3 +28,18 @@ def in_fresh_process(code: str) -> dict:
     """Run `code` (which prints one JSON object) in a new interpreter; peak memory is its own."""
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+@contextlib.contextmanager
+def worktree(revision):
+    """A temporary git worktree of `revision` of this repository (removed afterwards)."""
+    root = Path(__file__).resolve().parents[1]
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "base"
+        subprocess.run(["git", "-C", str(root), "worktree", "add", "--detach", "-q", str(path),
+                        revision], check=True)
+        try:
+            yield path
+        finally:
+            subprocess.run(["git", "-C", str(root), "worktree", "remove", "--force", str(path)],
+                           check=False)

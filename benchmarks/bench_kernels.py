@@ -20,6 +20,8 @@ import sys
 import tempfile
 from pathlib import Path
 
+from _common import worktree
+
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 
@@ -105,39 +107,32 @@ def main():
     p.add_argument("--morse", nargs="+", type=int, default=[256, 512])
     p.add_argument("--repeat", type=int, default=2)
     args = p.parse_args()
-    with tempfile.TemporaryDirectory() as tmp:
-        base = Path(tmp) / "base"
-        subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", "-q", str(base),
-                        args.base], check=True)
-        try:
-            for n in args.sizes:
-                floor = run(FLOOR, ROOT, n=n, repeat=args.repeat)["t"]
-                print(f"floor            {n}^3: {floor:7.3f} s ({n**3 / floor / 1e6:5.2f} M voxels/s)",
-                      flush=True)
-                for op in ["weighted", "laplace_beltrami"]:
-                    old = run(CURVATURE, base, n=n, op=op, repeat=args.repeat)["t"]
-                    new = run(CURVATURE, ROOT, n=n, op=op, repeat=args.repeat)["t"]
-                    print(f"{op:16s} {n}^3: base {old:7.3f} s, now {new:7.3f} s "
-                          f"({n**3 / new / 1e6:5.2f} M voxels/s): {old / new:4.2f}x faster, "
-                          f"{floor / new:4.0%} of the floor's speed", flush=True)
-            volume, curvature = Path(tmp) / "volume.npy", Path(tmp) / "curvature.npy"
-            run(INPUTS, ROOT, n=256, volume=str(volume), curvature=str(curvature))
-            for what in ["weighted", "laplace_beltrami", "morse"]:
-                path = str(curvature if what == "morse" else volume)
-                old = run(MEMORY, base, what=what, path=path)["extra"]
-                new = run(MEMORY, ROOT, what=what, path=path)["extra"]
-                print(f"memory {what:16s} 256^3: base {old:5.1f}, now {new:5.1f} bytes/voxel "
-                      "beyond the input", flush=True)
-            for n in args.morse:
-                old = run(MORSE, base, n=n, repeat=args.repeat, phases=False)
-                new = run(MORSE, ROOT, n=n, repeat=args.repeat, phases=True)
-                print(f"morse            {n}^3 ({new['maxima']} maxima): base {old['t']:7.3f} s, "
-                      f"now {new['t']:7.3f} s: {old['t'] / new['t']:4.2f}x faster", flush=True)
-                print("    phases now: " + ", ".join(f"{k} {v:.2f} s"
-                                                     for k, v in new["phases"].items()), flush=True)
-        finally:
-            subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(base)],
-                           check=False)
+    with worktree(args.base) as base, tempfile.TemporaryDirectory() as tmp:
+        for n in args.sizes:
+            floor = run(FLOOR, ROOT, n=n, repeat=args.repeat)["t"]
+            print(f"floor            {n}^3: {floor:7.3f} s ({n**3 / floor / 1e6:5.2f} M voxels/s)",
+                  flush=True)
+            for op in ["weighted", "laplace_beltrami"]:
+                old = run(CURVATURE, base, n=n, op=op, repeat=args.repeat)["t"]
+                new = run(CURVATURE, ROOT, n=n, op=op, repeat=args.repeat)["t"]
+                print(f"{op:16s} {n}^3: base {old:7.3f} s, now {new:7.3f} s "
+                      f"({n**3 / new / 1e6:5.2f} M voxels/s): {old / new:4.2f}x faster, "
+                      f"{floor / new:4.0%} of the floor's speed", flush=True)
+        volume, curvature = Path(tmp) / "volume.npy", Path(tmp) / "curvature.npy"
+        run(INPUTS, ROOT, n=256, volume=str(volume), curvature=str(curvature))
+        for what in ["weighted", "laplace_beltrami", "morse"]:
+            path = str(curvature if what == "morse" else volume)
+            old = run(MEMORY, base, what=what, path=path)["extra"]
+            new = run(MEMORY, ROOT, what=what, path=path)["extra"]
+            print(f"memory {what:16s} 256^3: base {old:5.1f}, now {new:5.1f} bytes/voxel "
+                  "beyond the input", flush=True)
+        for n in args.morse:
+            old = run(MORSE, base, n=n, repeat=args.repeat, phases=False)
+            new = run(MORSE, ROOT, n=n, repeat=args.repeat, phases=True)
+            print(f"morse            {n}^3 ({new['maxima']} maxima): base {old['t']:7.3f} s, "
+                  f"now {new['t']:7.3f} s: {old['t'] / new['t']:4.2f}x faster", flush=True)
+            print("    phases now: " + ", ".join(f"{k} {v:.2f} s"
+                                                 for k, v in new["phases"].items()), flush=True)
 
 
 if __name__ == "__main__":

@@ -19,6 +19,8 @@ import sys
 import tempfile
 from pathlib import Path
 
+from _common import worktree
+
 HERE = Path(__file__).resolve().parents[1]
 
 CODE = """
@@ -64,21 +66,14 @@ def main():
     p.add_argument("--what", nargs="+", default=["weighted", "laplace_beltrami", "morse"])
     p.add_argument("--repeat", type=int, default=3)
     args = p.parse_args()
-    with tempfile.TemporaryDirectory() as tmp:
-        base = Path(tmp) / "base"
-        subprocess.run(["git", "-C", str(HERE), "worktree", "add", "--detach", "-q", str(base),
-                        args.base], check=True)
-        try:
-            for what in args.what:
-                for n in args.sizes:
-                    old = measure(base, what, n, args.repeat)
-                    new = measure(HERE, what, n, args.repeat)
-                    print(f"{what:17s} {n}^3: base {old:7.3f} s, now {new:7.3f} s "
-                          f"({n**3 / new / 1e6:5.2f} M voxels/s); now/base = {new / old:.2f}",
-                          flush=True)
-        finally:
-            subprocess.run(["git", "-C", str(HERE), "worktree", "remove", "--force", str(base)],
-                           check=False)
+    with worktree(args.base) as base:
+        for what in args.what:
+            for n in args.sizes:
+                old = measure(base, what, n, args.repeat)
+                new = measure(HERE, what, n, args.repeat)
+                print(f"{what:17s} {n}^3: base {old:7.3f} s, now {new:7.3f} s "
+                      f"({n**3 / new / 1e6:5.2f} M voxels/s); now/base = {new / old:.2f}",
+                      flush=True)
 
 
 if __name__ == "__main__":
