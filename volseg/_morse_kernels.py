@@ -8,10 +8,10 @@ The elder-rule sweep runs on the cell graph, not on every vertex: inside a
 descending cell the superlevel set is connected through the cell's maximum (steepest
 ascent stays above), so components merge only across edges between cells, and
 Kruskal over those edges, ordered by their lower endpoint, is the vertex sweep.
-`cross_edges` gathers them in memory order keeping (mostly) the highest edge per
-cell pair (only that one can ever join two components); `kruskal` then runs a
-union-find over maxima. Sweeping the cell-boundary vertices in value order instead
-was 3x slower at 256^3 (random access into the whole field).
+`cell_pairs` keeps exactly the highest edge per pair of adjacent cells (only that
+one can ever join two components); `kruskal` then runs a union-find over maxima.
+Sweeping the cell-boundary vertices in value order instead was 3x slower at 256^3
+(random access into the whole field).
 """
 
 import numba
@@ -74,100 +74,6 @@ def find_root(parent, x):
         parent[x] = parent[parent[x]]
         x = parent[x]
     return x
-
-
-_TABLE_BITS = 16  # 64 k pairs (1.5 MB): a chunk of about 2^18 vertices dedups well
-
-
-@numba.njit(cache=True, nogil=True, inline="always")
-def _emit(out_a, out_b, out_v, start, n, capacity, a, b, v):
-    """Write edge number n of a chunk if it fits; return n + 1 (the count goes on)."""
-    if n < capacity:
-        out_a[start + n] = a
-        out_b[start + n] = b
-        out_v[start + n] = v
-    return n + 1
-
-
-@numba.njit(cache=True, nogil=True, inline="always")
-def _keep(tab_a, tab_b, tab_v, mask, values, out_a, out_b, out_v, start, n, capacity, a, b, v):
-    """Offer edge (a, b) with saddle v to the table; returns the chunk's edge count."""
-    slot = (a * 1000003 + b * 7919) & mask
-    if tab_a[slot] == a and tab_b[slot] == b:
-        if _higher(values, v, tab_v[slot]):
-            tab_v[slot] = v
-        return n
-    if tab_a[slot] >= 0:  # evict the entry in the way
-        n = _emit(out_a, out_b, out_v, start, n, capacity, tab_a[slot], tab_b[slot], tab_v[slot])
-    tab_a[slot] = a
-    tab_b[slot] = b
-    tab_v[slot] = v
-    return n
-
-
-@numba.njit(cache=True, nogil=True)
-def _chunk_edges(values, vertices, lo, hi, grid, offsets, indptr, indices, cell,
-                 out_a, out_b, out_v, start, capacity):
-    """Cross-cell edges of vertices[lo:hi], deduplicated per cell pair.
-
-    The candidate saddle of an edge {u, v} between two cells is its lower end; the
-    pair is stored smaller cell id first. On a grid each edge is visited once, from
-    its end with the smaller node id (`offsets` holds only the positive half of the
-    neighbourhood); on a graph, from its lower end. A direct-mapped table keeps the
-    highest candidate per pair; an evicted entry is emitted, and the table is
-    flushed at the end. Duplicates of a pair may be emitted (harmless to Kruskal:
-    only the highest one of a pair can join two components). Writes the first
-    `capacity` edges from out_*[start]; returns how many there were in all.
-    """
-    size = 1 << _TABLE_BITS
-    mask = size - 1
-    tab_a = np.full(size, -1, dtype=cell.dtype)
-    tab_b = np.zeros(size, dtype=cell.dtype)
-    tab_v = np.zeros(size, dtype=vertices.dtype)
-    n = 0
-    for k in range(lo, hi):
-        v = vertices[k]
-        cv = cell[v]
-        if grid:
-            for t in range(len(offsets)):
-                u = v + offsets[t]
-                cu = cell[u]
-                if cu < 0 or cu == cv:  # off the vertices (pad, mask) or the same cell
-                    continue
-                a, b = (cv, cu) if cv < cu else (cu, cv)
-                low = u if _higher(values, v, u) else v
-                n = _keep(tab_a, tab_b, tab_v, mask, values, out_a, out_b, out_v, start, n,
-                          capacity, a, b, low)
-        else:
-            for e in range(indptr[v], indptr[v + 1]):
-                u = indices[e]
-                cu = cell[u]
-                if cu == cv or not _higher(values, u, v):
-                    continue
-                a, b = (cv, cu) if cv < cu else (cu, cv)
-                n = _keep(tab_a, tab_b, tab_v, mask, values, out_a, out_b, out_v, start, n,
-                          capacity, a, b, v)
-    for slot in range(size):
-        if tab_a[slot] >= 0:
-            n = _emit(out_a, out_b, out_v, start, n, capacity,
-                      tab_a[slot], tab_b[slot], tab_v[slot])
-    return n
-
-
-@numba.njit(cache=True, parallel=True)
-def cross_edges(values, vertices, bounds, chunks, grid, offsets, indptr, indices, cell,
-                out_a, out_b, out_v, starts, capacity, counts):
-    """`_chunk_edges` over vertices[bounds[c]:bounds[c + 1]] for c in `chunks`, in parallel.
-
-    The i-th chunk writes at most capacity[i] edges from starts[i] and reports its full
-    count in counts[i]; the caller reruns the chunks that overflowed. Chunking is
-    fixed, so the output does not depend on the thread count.
-    """
-    for i in numba.prange(len(chunks)):
-        c = chunks[i]
-        counts[i] = _chunk_edges(values, vertices, bounds[c], bounds[c + 1], grid, offsets,
-                                 indptr, indices, cell, out_a, out_b, out_v, starts[i],
-                                 capacity[i])
 
 
 @numba.njit(cache=True, parallel=True)

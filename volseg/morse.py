@@ -148,7 +148,7 @@ def _csr_adjacency(adjacency, n_vertices):
     return indptr, key % n_vertices
 
 
-#: Vertices per chunk of the cross-edge pass (chunks are ranges of cells).
+#: Vertices per chunk of the cross-edge pass (a chunk is a run of cells).
 _CHUNK_VERTICES = 1 << 20
 
 
@@ -210,7 +210,8 @@ def _pair_pass(kernels, args, chunks, capacity):
     out = [np.empty(total, dtype=cell.dtype), np.empty(total, dtype=cell.dtype),
            np.empty(total, dtype=members.dtype)]
     kernels.cell_pairs(flat, members, starts, visit, bounds, chunks, grid, offsets, indptr,
-                       indices, cell, degree, sizes, *out, out_starts, capacity.astype(np.int64), counts)
+                       indices, cell, degree, sizes, *out, out_starts,
+                       capacity.astype(np.int64), counts)
     return out, out_starts, counts
 
 
@@ -356,8 +357,8 @@ class _MergeEvents:
 
 def _merge_events(kernels, graph: _Neighbourhood, cell, n_maxima,
                   phases: _Phases) -> _MergeEvents:
-    """Cross-cell edges gathered in memory order (parallel, cache-friendly) with a
-    per-pair dedup, then one Kruskal over them by decreasing saddle (value, index)."""
+    """One edge per pair of adjacent cells (its highest saddle), sorted by (saddle value,
+    saddle vertex, pair), then one Kruskal over them from the highest saddle down."""
     edge_a, edge_b, edge_v = _cross_edges(kernels, graph.values, graph.vertices, graph.grid,
                                           graph.offsets, graph.indptr, graph.indices, cell,
                                           n_maxima)
