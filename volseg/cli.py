@@ -21,7 +21,6 @@ from .curvature import cli_choices, normalize_operator
 from .segment import AUTO_REGION_RANGE, DEFAULT_REGIONS
 
 
-
 class UsageError(ValueError):
     """Bad input or usage: exit code 2."""
 
