@@ -263,3 +263,21 @@ def cell_pairs(values, members, starts, visit, bounds, chunks, grid, offsets, in
                                     grid, offsets, indptr, indices, cell, degree, out_a, out_b,
                                     out_v, out_starts[i], capacity[i], table, part_b, part_v,
                                     part_slot)
+
+
+@numba.njit(cache=True, nogil=True)
+def roots(vertices, up):
+    """The vertices v with up[v] == v (the maxima), in the order of `vertices`, without
+    the two field-sized temporaries of the numpy expression."""
+    n = 0
+    for k in range(len(vertices)):
+        if up[vertices[k]] == vertices[k]:
+            n += 1
+    out = np.empty(n, dtype=vertices.dtype)
+    n = 0
+    for k in range(len(vertices)):
+        v = vertices[k]
+        if up[v] == v:
+            out[n] = v
+            n += 1
+    return out

@@ -152,7 +152,7 @@ def _csr_adjacency(adjacency, n_vertices):
 _CHUNK_VERTICES = 1 << 20
 
 
-def _cross_edges(kernels, flat, real, grid, offsets, indptr, indices, cell, n_cells):
+def _cross_edges(kernels, graph, cell, n_cells):
     """(a, b, saddle) of every pair of adjacent cells, a < b, with its highest saddle.
 
     The vertices are grouped by cell (a counting sort), then each cell's edges to
@@ -160,26 +160,31 @@ def _cross_edges(kernels, flat, real, grid, offsets, indptr, indices, cell, n_ce
     which is all the elder-rule union-find needs (a lower edge of a pair can never
     join two components). Cells are walked in the order of their first vertex (so
     the walk moves through memory), in chunks of about `_CHUNK_VERTICES` vertices run
-    in parallel; each chunk gets room for 16 pairs per cell plus one per 4 vertices
+    in parallel; each chunk gets room for 10 pairs per cell plus one per 16 vertices
     (quantized fields need about 8 per cell), and the chunks that overflow are rerun
-    with exact room.
+    with exact room. The grouping is freed before the pieces are joined, so the peak
+    stays near the field's own arrays (about 24 bytes per voxel in all at 256^3).
     """
+    flat, grid, offsets, indptr, indices = (graph.values, graph.grid, graph.offsets,
+                                            graph.indptr, graph.indices)
+    n_real = len(graph.vertices)
     starts = np.empty(n_cells + 1, dtype=np.int64)
-    members = np.empty(len(real), dtype=real.dtype)
-    kernels.group_by_cell(real, cell, n_cells, starts, members)
+    members = np.empty(n_real, dtype=graph.vertices.dtype)
+    kernels.group_by_cell(graph.vertices, cell, n_cells, starts, members)
+    graph.vertices = None  # members hold every vertex now: 4 bytes per voxel less at the peak
     # Cells in the order of their first vertex, so that the walk moves through memory.
     visit = np.argsort(members[starts[:-1]], kind="stable").astype(np.int64)
     counts_in_order = np.diff(starts)[visit]
-    n_chunks = max(1, min(256, -(-len(real) // _CHUNK_VERTICES)))
+    n_chunks = max(1, min(256, -(-n_real // _CHUNK_VERTICES)))
     bounds = np.searchsorted(np.cumsum(counts_in_order),
-                             np.linspace(0, len(real), n_chunks + 1)[1:], side="left") + 1
+                             np.linspace(0, n_real, n_chunks + 1)[1:], side="left") + 1
     bounds = np.minimum(np.concatenate([[0], bounds]), n_cells).astype(np.int64)
     bounds[-1] = n_cells
     chunks = np.arange(n_chunks, dtype=np.int64)
     cells_in = np.diff(bounds)
     vertices_in = np.add.reduceat(counts_in_order, np.minimum(bounds[:-1], n_cells - 1))
     vertices_in[cells_in == 0] = 0
-    capacity = 16 * cells_in + vertices_in // 4 + 1024
+    capacity = 10 * cells_in + vertices_in // 16 + 1024
     degree = len(offsets) if grid else int(np.diff(indptr).max(initial=0))
     # Partner table per chunk: twice the largest partner bound of its cells, a power of 2.
     sizes = np.minimum(degree * counts_in_order, n_cells)
@@ -192,6 +197,7 @@ def _cross_edges(kernels, flat, real, grid, offsets, indptr, indices, cell, n_ce
     over = np.flatnonzero(counts > capacity)
     if len(over):
         room, room_starts, _ = _pair_pass(kernels, args, over, counts[over])
+    del args, members, starts, visit
     pieces = []
     for c in range(n_chunks):
         if counts[c] <= capacity[c]:
@@ -335,7 +341,7 @@ def _descending_cells(kernels, graph: _Neighbourhood, phases: _Phases):
     cell = np.full(len(graph.values), -1, dtype=index_type)
     kernels.resolve_cells(graph.vertices, up, cell)
     phases.done("path compression")
-    maxima = graph.vertices[up[graph.vertices] == graph.vertices]
+    maxima = kernels.roots(graph.vertices, up)
     # Maximum ids by decreasing value (simulation of simplicity: then by index).
     maxima = maxima[np.lexsort((maxima, graph.values[maxima]))[::-1]]
     up[maxima] = np.arange(len(maxima), dtype=index_type)  # up is free now: root -> id
@@ -359,9 +365,7 @@ def _merge_events(kernels, graph: _Neighbourhood, cell, n_maxima,
                   phases: _Phases) -> _MergeEvents:
     """One edge per pair of adjacent cells (its highest saddle), sorted by (saddle value,
     saddle vertex, pair), then one Kruskal over them from the highest saddle down."""
-    edge_a, edge_b, edge_v = _cross_edges(kernels, graph.values, graph.vertices, graph.grid,
-                                          graph.offsets, graph.indptr, graph.indices, cell,
-                                          n_maxima)
+    edge_a, edge_b, edge_v = _cross_edges(kernels, graph, cell, n_maxima)
     phases.done("cross-cell edges")
     order = _saddle_order(graph.values, edge_v, edge_a, edge_b)
     phases.done("saddle order (sort, ties)")
