@@ -51,13 +51,15 @@ _OFFSETS, _PATH_IDX, _AXES, _FACE_IDX, _FACE_FAR, _FACE_TETS = _tables()
 
 
 def _kernel_tables(h):
-    """The tables with the spacing folded in (base edge vectors, sides, base areas)."""
+    """What the kernels read at run time: the point offsets, tetrahedron paths and axes
+    (intrinsic operator) and each face's |u_b x v_b|^2, the squared doubled area of its
+    base triangle with the spacing folded in (weighted operator). The rest of the face
+    geometry is written into the generated stencil."""
     base = _OFFSETS * h
     p0 = base[_FACE_IDX[:, 0]]
     ub, vb = base[_FACE_IDX[:, 1]] - p0, base[_FACE_IDX[:, 2]] - p0
-    side = base[_FACE_FAR] - p0
     cross2 = (np.cross(ub, vb) ** 2).sum(axis=1)
-    return (_OFFSETS, _PATH_IDX, _AXES, _FACE_IDX, side, ub, vb, cross2, _FACE_TETS)
+    return (_OFFSETS, _PATH_IDX, _AXES, cross2)
 
 
 def default_value_scale(volume: ArrayLike, spacing=(1.0, 1.0, 1.0)) -> float:

@@ -74,7 +74,7 @@ def grid_kernel(fp, h, operator, tables, acc):
     sum of |sigma| grad(phi_p) and acc[6:9] the x, y, z parts of the sum of
     |sigma| nu (its last part is 24 V0 at every vertex with a full star).
     """
-    cross2 = tables[7]
+    cross2 = tables[3]
     shape = fp.shape
     fpf = fp.reshape(-1)
     flat = acc.reshape(acc.shape[0], -1)
