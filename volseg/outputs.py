@@ -19,7 +19,8 @@ from . import _json
 from ._version import __version__
 from .io import Frame, OutputSet, write_volume
 
-__all__ = ["OUTPUT_SUFFIXES", "output_names", "files_sha256", "summary", "write_segmentation"]
+__all__ = ["OUTPUT_SUFFIXES", "output_names", "files_sha256", "summary", "result_summary",
+           "input_summary", "write_segmentation"]
 
 OUTPUT_SUFFIXES = {"labels": "_labels.nii.gz", "curvature": "_curvature.nii.gz",
                    "summary": "_summary.json", "preview": "_preview.png"}
@@ -52,27 +53,12 @@ def files_sha256(paths) -> str | None:
     return digest.hexdigest()
 
 
-def summary(result, *, name, source=None, checksum=None, files=(), frame: Frame | None = None,
-            noise=None, seed=None, requested_regions=None) -> dict:
-    """The summary dictionary of a `Segmentation` (strict-JSON ready)."""
-    regions = result.region_table()
-    out = {
-        "volseg_version": __version__,
-        "input": str(source) if source else name,
-        "input_files": [str(f) for f in files],
-        "input_sha256": checksum,
-        "shape": list(result.labels.shape),
-        "spacing": list(result.spacing),
-        "affine": (frame.affine if frame is not None else np.diag([*result.spacing, 1.0])).tolist(),
+def result_summary(result) -> dict:
+    """The part of a summary every `Segmentation` has, volume or mesh: operator, cut,
+    persistence, regions, timings."""
+    return {
         "operator": result.operator,
-        "value_scale": result.value_scale,
-        "noise_percent": noise or 0.0,
-        "seed": seed if noise else None,
-        "smooth_sigma_voxels": result.smooth,
-        "mask": result.mask.describe(),
-        "labels": "0 outside the mask, regions 1..k",
         "n_regions": result.n_regions,
-        "requested_regions": requested_regions,
         "cut": "auto: the largest persistence gap for 20-40 regions" if result.cut.get("auto")
         else ("persistence threshold" if result.cut.get("min_persistence") is not None
               else "region count"),
@@ -84,8 +70,40 @@ def summary(result, *, name, source=None, checksum=None, files=(), frame: Frame 
             f"largest_{LISTED_PERSISTENCES}": np.sort(
                 result.hierarchy.event_persistence)[::-1][:LISTED_PERSISTENCES].tolist(),
         },
-        "regions": regions,
+        "regions": result.region_table(),
         "timings_s": {k: round(v, 4) for k, v in result.timings.items()},
+    }
+
+
+def input_summary(name, source=None, checksum=None, files=()) -> dict:
+    """Where the input came from: name or path, every file read, their SHA-256."""
+    return {
+        "volseg_version": __version__,
+        "input": str(source) if source else name,
+        "input_files": [str(f) for f in files],
+        "input_sha256": checksum,
+    }
+
+
+def summary(result, *, name, source=None, checksum=None, files=(), frame: Frame | None = None,
+            noise=None, seed=None, requested_regions=None) -> dict:
+    """The summary dictionary of a `Segmentation` of a volume (strict-JSON ready)."""
+    common = result_summary(result)
+    out = {
+        **input_summary(name, source, checksum, files),
+        "shape": list(result.labels.shape),
+        "spacing": list(result.spacing),
+        "affine": (frame.affine if frame is not None else np.diag([*result.spacing, 1.0])).tolist(),
+        "operator": common.pop("operator"),
+        "value_scale": result.value_scale,
+        "noise_percent": noise or 0.0,
+        "seed": seed if noise else None,
+        "smooth_sigma_voxels": result.smooth,
+        "mask": result.mask.describe(),
+        "labels": "0 outside the mask, regions 1..k",
+        "n_regions": common.pop("n_regions"),
+        "requested_regions": requested_regions,
+        **common,
     }
     return out
 

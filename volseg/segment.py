@@ -14,7 +14,7 @@ from .curvature._grid import check_boundary, checked_grid_curvature
 from .masks import MaskChoice
 from .morse import MorseHierarchy, check_cut, descending_complex
 
-__all__ = ["Segmentation", "segment_volume", "DEFAULT_REGIONS", "AUTO_REGION_RANGE"]
+__all__ = ["Segmentation", "segment_volume", "segment_mesh", "DEFAULT_REGIONS", "AUTO_REGION_RANGE"]
 
 #: Default cut: 30 regions, the middle of the paper's 20-40 range.
 DEFAULT_REGIONS = 30
@@ -24,15 +24,16 @@ AUTO_REGION_RANGE = (20, 40)
 
 @dataclass
 class Segmentation:
-    """The result of `segment_volume`.
+    """The result of `segment_volume` (a volume) or `segment_mesh` (a mesh).
 
     Attributes
     ----------
-    labels : (X, Y, Z) ndarray of int32
+    labels : (X, Y, Z) or (V,) ndarray of int32
         Regions 1..k, ordered by decreasing curvature at their centre; 0 for
-        voxels outside the mask (none without one). The same in the NIfTI outputs.
-    curvature : (X, Y, Z) ndarray of float64
-        On the whole volume (after `smooth`), mask or not.
+        voxels outside the mask (none without one) or mesh vertices left out. The
+        same in the NIfTI outputs.
+    curvature : (X, Y, Z) or (V,) ndarray of float64
+        On the whole volume (after `smooth`), mask or not; per mesh vertex.
     hierarchy : MorseHierarchy
         Cut it again (``hierarchy.segment(n_regions=...)``) without recomputing.
     n_regions : int
@@ -61,6 +62,8 @@ class Segmentation:
     cut: dict = field(default_factory=dict)
     mask: MaskChoice | None = None
     smooth: float = 0.0
+    vertices: NDArray[np.float64] | None = None
+    simplices: NDArray[np.intp] | None = None
 
     def _cut(self) -> dict:
         return {"min_persistence": self.cut.get("min_persistence"),
@@ -75,14 +78,19 @@ class Segmentation:
         return self.hierarchy.maxima[seen].astype(np.int64)
 
     def region_table(self) -> list[dict]:
-        """One entry per region: ``label`` (1..k), ``size`` (voxels), ``maximum``
-        ([x, y, z] of its highest curvature maximum) and ``curvature_at_maximum``."""
+        """One entry per region: ``label`` (1..k), ``size`` (voxels or vertices),
+        ``maximum`` (its highest curvature maximum: [x, y, z] voxel, or the vertex
+        index with its ``position`` on a mesh) and ``curvature_at_maximum``."""
         sizes = np.bincount(self.labels.ravel(), minlength=self.n_regions + 1)
         table = []
         for region, top in enumerate(self.region_maxima(), 1):
             where = tuple(int(c) for c in np.unravel_index(top, self.labels.shape))
-            table.append({"label": region, "size": int(sizes[region]), "maximum": list(where),
-                          "curvature_at_maximum": float(self.curvature[where])})
+            entry = {"label": region, "size": int(sizes[region]), "maximum": list(where),
+                     "curvature_at_maximum": float(self.curvature[where])}
+            if self.vertices is not None:
+                entry["maximum"] = int(top)
+                entry["position"] = self.vertices[top].tolist()
+            table.append(entry)
         return table
 
 
@@ -137,10 +145,7 @@ def segment_volume(
     from .masks import foreground_mask
 
     entry = get_operator(operator)
-    auto = isinstance(n_regions, str) and n_regions == "auto"
-    min_persistence, n_regions = check_cut(min_persistence, None if auto else n_regions)
-    if min_persistence is None and n_regions is None and not auto:
-        n_regions = DEFAULT_REGIONS
+    min_persistence, n_regions, auto = _cut_request(min_persistence, n_regions)
     spacing = _validate.spacing(spacing, getattr(volume, "spacing", (1.0, 1.0, 1.0)))
     data = _validate.volume_array(volume)
     smooth = _validate.smooth(smooth)
@@ -159,15 +164,110 @@ def segment_volume(
     start = time.perf_counter()
     hierarchy = descending_complex(curvature, mask=choice.mask)
     timings["morse"] = time.perf_counter() - start
+    labels, k, threshold, cut = _cut(hierarchy, min_persistence, n_regions, auto, timings)
+    return Segmentation(labels, curvature, hierarchy, k, entry.name, threshold, value_scale,
+                        spacing, timings, cut, choice, smooth)
+
+
+def _cut_request(min_persistence, n_regions) -> tuple:
+    """(min_persistence, n_regions, auto) from what the caller asked; 30 regions when
+    nothing was."""
+    auto = isinstance(n_regions, str) and n_regions == "auto"
+    min_persistence, n_regions = check_cut(min_persistence, None if auto else n_regions)
+    if min_persistence is None and n_regions is None and not auto:
+        n_regions = DEFAULT_REGIONS
+    return min_persistence, n_regions, auto
+
+
+def _cut(hierarchy: MorseHierarchy, min_persistence, n_regions, auto, timings) -> tuple:
+    """Labels 1..k (0 outside the mask), k, the cut's threshold and its description."""
     start = time.perf_counter()
     if auto:
         n_regions = hierarchy.largest_gap(AUTO_REGION_RANGE)
     labels = hierarchy.segment(min_persistence=min_persistence, n_regions=n_regions)
-    if choice.mask is None:
+    if hierarchy.mask is None:
         labels += 1  # regions 1..k; 0 is kept for voxels outside a mask
     timings["cut"] = time.perf_counter() - start
     k = int(labels.max())
     threshold = float(min_persistence) if min_persistence is not None else hierarchy.threshold_for(k)
-    cut = {"min_persistence": min_persistence, "n_regions": n_regions, "auto": auto}
-    return Segmentation(labels, curvature, hierarchy, k, entry.name, threshold, value_scale,
-                        spacing, timings, cut, choice, smooth)
+    return labels, k, threshold, {"min_persistence": min_persistence, "n_regions": n_regions,
+                                  "auto": auto}
+
+
+def segment_mesh(
+    vertices,
+    simplices,
+    *,
+    operator: str = "weighted",
+    n_regions: int | str | None = None,
+    min_persistence: float | None = None,
+    boundary: str = "partial",
+    smooth: int = 0,
+) -> Segmentation:
+    """Segment an oriented n-manifold in R^(n+1) by the descending Morse complex of its
+    mean curvature on the mesh's vertex graph (its edges).
+
+    The same stage as `segment_volume`, for meshes that are not graphs of a volume:
+    isosurfaces of time-varying fields (`volseg.tessellation.isosurface`), spheres,
+    any closed or bounded hypersurface.
+
+    Parameters
+    ----------
+    vertices : (V, n+1) array_like of float
+    simplices : (S, n+1) array_like of int
+        Consistently oriented (DESIGN.md section 2); H > 0 where the surface bends
+        away from its normals (on a blob with outward normals, everywhere).
+    operator : {'weighted', 'unweighted', 'laplace_beltrami', 'intrinsic'}
+    n_regions : int or 'auto', optional
+        As in `segment_volume` (default 30 without `min_persistence`).
+    min_persistence : float, optional
+    boundary : {'partial', 'nan'}
+        Boundary vertices (on a face of one simplex, e.g. where an isosurface meets
+        the grid's edge): ``'partial'`` gives them the operator over their
+        incomplete star (its bending is only that of the faces inside, so it is
+        biased; they are segmented like the others); ``'nan'`` leaves them out of
+        the Morse graph with label 0 and NaN curvature.
+    smooth : int
+        Rounds of 1-ring averaging of the curvature before the Morse stage (the
+        paper smooths estimates on irregular meshes; 0: none).
+
+    Returns
+    -------
+    Segmentation
+        ``labels`` and ``curvature`` per vertex; ``vertices`` and ``simplices`` the
+        mesh; ``spacing`` None; ``mask`` names the vertices segmented.
+
+    Raises
+    ------
+    ValueError
+        A mesh `vertex_curvature` refuses (not a manifold, inconsistent orientation,
+        degenerate simplices), a bad cut, or an unknown operator or boundary rule.
+    """
+    from . import mesh as _mesh
+    from .curvature import vertex_curvature
+
+    entry = get_operator(operator)
+    if boundary not in ("partial", "nan"):
+        raise ValueError(f"unknown `boundary` {boundary!r}; choose 'partial' or 'nan'")
+    smooth = int(smooth)
+    if smooth < 0:
+        raise ValueError(f"`smooth` must be a number of rounds >= 0, got {smooth}")
+    min_persistence, n_regions, auto = _cut_request(min_persistence, n_regions)
+    vertices, simplices = _mesh.check_mesh(vertices, simplices)
+    timings = {}
+    start = time.perf_counter()
+    curvature = vertex_curvature(vertices, simplices, entry.name, boundary=boundary)
+    if smooth:
+        curvature = _mesh.ring_average(curvature, simplices, smooth)
+    timings["curvature"] = time.perf_counter() - start
+    start = time.perf_counter()
+    known = np.isfinite(curvature)   # boundary vertices with 'nan', vertices in no simplex
+    mask = None if known.all() else known
+    hierarchy = descending_complex(np.where(known, curvature, 0.0),
+                                   adjacency=_mesh.edges(simplices), mask=mask)
+    timings["morse"] = time.perf_counter() - start
+    labels, k, threshold, cut = _cut(hierarchy, min_persistence, n_regions, auto, timings)
+    used = "all vertices" if mask is None else "vertices with a complete star"
+    choice = MaskChoice(mask, boundary, used, int(known.sum()))
+    return Segmentation(labels, curvature, hierarchy, k, entry.name, threshold, None, None,
+                        timings, cut, choice, float(smooth), vertices, simplices)

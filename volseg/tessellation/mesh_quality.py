@@ -19,31 +19,31 @@ __all__ = ["relax_isosurface", "dihedral_angles", "quality"]
 
 
 class _Spline:
-    """Cubic B-spline interpolant of a grid field, in world coordinates; its gradient
-    is the cubic spline of the samples' central differences (d + 1 interpolations per
-    point instead of 2d + 1 for differences of the interpolant; the vertices end on
-    the level set of the value spline either way, the gradient only steers)."""
+    """The cubic B-spline through the samples and its exact gradient, in world
+    coordinates. The field is padded by repeating its edge samples, so points inside
+    the grid never need a boundary rule (`_spline_kernels`)."""
 
     def __init__(self, field, spacing, origin):
         from scipy.ndimage import spline_filter
 
-        field = np.asarray(field, dtype=np.float64)
-        self.coefficients = [spline_filter(field, order=3, mode="nearest")]
-        for axis, gradient in enumerate(np.gradient(field, *spacing, edge_order=2)):
-            self.coefficients.append(spline_filter(gradient, order=3, mode="nearest"))
+        from ._spline_kernels import PAD
+
+        padded = np.pad(np.asarray(field, dtype=np.float64), PAD, mode="edge")
+        self.coefficients = np.ascontiguousarray(spline_filter(padded, order=3, mode="mirror"))
+        self.strides = np.array(self.coefficients.strides, dtype=np.int64) // 8
+        self.upper = np.array(field.shape, dtype=np.float64) - 1
         self.spacing, self.origin = spacing, origin
 
-    def _at(self, which, index):
-        from scipy.ndimage import map_coordinates
-
-        return map_coordinates(self.coefficients[which], index.T, order=3, mode="nearest",
-                               prefilter=False)
-
     def value_and_gradient(self, points):
-        index = (points - self.origin) / self.spacing
-        gradient = np.stack([self._at(1 + axis, index) for axis in range(points.shape[1])],
-                            axis=1)
-        return self._at(0, index), gradient
+        from ._spline_kernels import value_and_gradient, value_and_gradient_4d
+
+        index = np.ascontiguousarray((points - self.origin) / self.spacing)
+        value = np.empty(len(points))
+        gradient = np.empty_like(index)
+        kernel = value_and_gradient_4d if index.shape[1] == 4 else value_and_gradient
+        kernel(self.coefficients.ravel(), self.strides, self.upper, index, 1.0 / self.spacing,
+               value, gradient)
+        return value, gradient
 
 
 def _free_axes(surface: Isosurface, shape, layer_axis) -> NDArray[np.bool_]:

@@ -1,0 +1,122 @@
+"""Time series of volumes: one 4-D file (x, y, z, t) or several 3-D files in time order.
+
+The readers are those of `read_volume` (bounded, every field checked); a series adds
+only that every step has the same shape and spacing.
+"""
+
+from __future__ import annotations
+
+import glob
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .. import _validate
+from ._files import regular_file_size
+from .readers import _read_nifti, _read_npy, read_volume
+from .volume import Frame, VolumeFileError
+
+__all__ = ["Series", "read_series", "SERIES_SUFFIXES"]
+
+#: Files that may hold a whole (x, y, z, t) series.
+SERIES_SUFFIXES = (".npy", ".nii", ".nii.gz")
+
+
+@dataclass
+class Series:
+    """A time-varying volume.
+
+    Attributes
+    ----------
+    data : (X, Y, Z, T) ndarray
+        Indexed [x, y, z, t].
+    spacing : (3,) tuple of float
+        Voxel size (of the first step; every step must agree).
+    name : str
+        Output stem.
+    files : tuple of Path
+        Every file read, in time order.
+    frame : Frame
+        Voxel-to-world frame of the first step.
+    """
+
+    data: NDArray
+    spacing: tuple
+    name: str
+    files: tuple = field(default_factory=tuple)
+    frame: Frame | None = None
+
+    @property
+    def shape(self) -> tuple:
+        return self.data.shape
+
+
+def _expand(inputs) -> list[Path]:
+    paths = []
+    for item in inputs:
+        text = str(item)
+        if any(c in text for c in "*?[") and not Path(text).exists():
+            matched = sorted(glob.glob(text))
+            if not matched:
+                raise FileNotFoundError(2, "no file matches this pattern", text)
+            paths.extend(Path(m) for m in matched)
+        else:
+            paths.append(Path(text))
+    return paths
+
+
+def read_series(inputs, *, allow_external_data: bool = False) -> Series:
+    """Read a time series.
+
+    Parameters
+    ----------
+    inputs : path, or sequence of paths or glob patterns
+        One ``.npy`` / ``.nii`` / ``.nii.gz`` file holding an (x, y, z, t) array, or
+        two or more 3-D volumes (any format `read_volume` reads) in time order; a
+        glob pattern expands to its matches sorted by name.
+
+    Returns
+    -------
+    Series
+
+    Raises
+    ------
+    VolumeFileError
+        A file `read_volume` refuses, a single file that is not 4-D, steps of
+        different shapes or spacings, fewer than 2 time steps.
+    FileNotFoundError
+        A missing file or a pattern that matches nothing.
+    """
+    if isinstance(inputs, (str, Path)):
+        inputs = [inputs]
+    paths = _expand(inputs)
+    if len(paths) == 1:
+        path = paths[0]
+        regular_file_size(path)
+        lower = path.name.lower()
+        if not lower.endswith(SERIES_SUFFIXES):
+            raise VolumeFileError(f"{path}: one file must hold the whole series as an (x, y, z, t) "
+                                  f"array ({', '.join(SERIES_SUFFIXES)}); or give one 3-D volume "
+                                  "per time step")
+        reader = _read_npy if lower.endswith(".npy") else _read_nifti
+        try:
+            data, frame, name, _, files = reader(path, None, None, None, allow_external_data)
+        except MemoryError:
+            raise VolumeFileError(f"{path}: the declared size does not fit in this machine's memory") from None
+        data = _validate.volume_array(data, source=path, error=VolumeFileError, ndim=4)
+        frame = frame or Frame.from_spacing((1.0, 1.0, 1.0))
+        return Series(data, tuple(frame.spacing), name, tuple(files), frame)
+    steps = [read_volume(p, allow_external_data=allow_external_data) for p in paths]
+    first = steps[0]
+    for path, step in zip(paths[1:], steps[1:]):
+        if step.shape != first.shape:
+            raise VolumeFileError(f"{path}: time step of shape {step.shape}, but {paths[0]} is "
+                                  f"{first.shape}; every step must have the same shape")
+        if not np.allclose(step.spacing, first.spacing):
+            raise VolumeFileError(f"{path}: spacing {step.spacing} differs from {paths[0]}'s "
+                                  f"{first.spacing}")
+    data = np.stack([np.asarray(s.data) for s in steps], axis=-1)
+    files = tuple(f for s in steps for f in s.files)
+    return Series(data, tuple(first.spacing), first.name, files, first.frame)
