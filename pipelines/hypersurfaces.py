@@ -117,6 +117,10 @@ def odt_smooth(points, fixed, iterations: int = 10) -> tuple:
         rhs = 0.5 * np.einsum("tij,tij->ti", edges, edges)
         keep = volume > 1e-12 * np.median(volume)
         centre = p[keep, 0] + np.linalg.solve(edges[keep], rhs[keep][..., None])[..., 0]
+        # A circumcentre outside the cube (flat tetrahedra at the boundary) would drag
+        # vertices onto it; those tetrahedra vote with their centroid instead.
+        outside = (np.abs(centre) > 1).any(axis=1)
+        centre[outside] = p[keep][outside].mean(axis=1)
         weight = np.repeat(volume[keep], 4)
         total = np.bincount(tets[keep].ravel(), weight, minlength=len(points))
         moved = np.stack([np.bincount(tets[keep].ravel(), weight * np.repeat(centre[:, a], 4),

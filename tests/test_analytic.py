@@ -134,7 +134,7 @@ def test_implicit_mean_curvature_sphere_graph_and_cylinder():
         x = rng.uniform(-0.8, 0.8, (15, 3))
         on = np.c_[x, function(*x.T)]
         implicit = implicit_mean_curvature(*derivatives(
-            lambda p: function(p[:, 0], p[:, 1], p[:, 2]) - p[:, 3], on))
+            lambda p, f=function: f(p[:, 0], p[:, 1], p[:, 2]) - p[:, 3], on))
         assert np.allclose(implicit, function.mean_curvature(*x.T), atol=1e-8)
     # Cylinder S^1(r) x R^2 with outward normals: H = 1 / (3 r).
     cylinder = np.c_[0.5 * np.cos(np.arange(10)), 0.5 * np.sin(np.arange(10)), rng.normal(size=(10, 2))]

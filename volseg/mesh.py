@@ -299,6 +299,23 @@ def _cofactor_normals(edges: NDArray[np.float64]) -> NDArray[np.float64]:
     return normals
 
 
+def flat_simplices(vertices: ArrayLike, simplices: ArrayLike) -> NDArray[np.bool_]:
+    """(S,) bool: simplices whose n-volume is zero relative to their longest edge
+    (below 1e-12 of the longest edge^n / n!): the ones curvature is undefined on."""
+    vertices = np.asarray(vertices, dtype=np.float64)
+    simplices = np.asarray(simplices, dtype=np.intp)
+    edges = _edge_vectors(vertices, simplices)
+    return flat_by_edges(edges, np.linalg.norm(_cofactor_normals(edges), axis=1)
+                         / math.factorial(simplices.shape[1] - 1))
+
+
+def flat_by_edges(edges: NDArray[np.float64], volumes: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """`flat_simplices` from the (S, n, d) edge vectors and the n-volumes."""
+    n = edges.shape[1]
+    scale = np.sqrt(np.einsum("sij,sij->si", edges, edges).max(axis=1)) ** n / math.factorial(n)
+    return volumes <= 1e-12 * scale
+
+
 def simplex_volumes(vertices: ArrayLike, simplices: ArrayLike) -> NDArray[np.float64]:
     """k-volume of each k-simplex, ``sqrt(det(E E^T)) / k!`` (any ambient dimension).
 

@@ -66,7 +66,7 @@ def series_summary(result, slices, *, name, source=None, checksum=None, files=()
 
 def _write_pvd(path, vtu_names, times):
     rows = "\n".join(f'    <DataSet timestep="{t!r}" group="" part="0" file={quoteattr(n)}/>'
-                     for t, n in zip(times, vtu_names))
+                     for t, n in zip(times, vtu_names, strict=True))
     Path(path).write_text('<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1">\n'
                           f"  <Collection>\n{rows}\n  </Collection>\n</VTKFile>\n")
 

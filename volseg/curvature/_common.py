@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-import math
 from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
 from .. import mesh as _mesh
+
 
 class MeshParts(NamedTuple):
     """What every mesh operator receives: a checked mesh and its shared pieces."""
@@ -27,9 +27,7 @@ def edge_gram(edges: NDArray[np.float64]) -> NDArray[np.float64]:
 
 def check_nondegenerate(edges, simplices, volumes) -> None:
     """Refuse simplices whose n-volume is zero relative to their edge lengths."""
-    n = simplices.shape[1] - 1
-    scale = np.sqrt(np.einsum("sij,sij->si", edges, edges).max(axis=1)) ** n / math.factorial(n)
-    flat = volumes <= 1e-12 * scale
+    flat = _mesh.flat_by_edges(edges, volumes)
     if flat.any():
         first = int(np.flatnonzero(flat)[0])
         raise ValueError(

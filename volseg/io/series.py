@@ -110,7 +110,7 @@ def read_series(inputs, *, allow_external_data: bool = False) -> Series:
         return Series(data, tuple(frame.spacing), name, tuple(files), frame)
     steps = [read_volume(p, allow_external_data=allow_external_data) for p in paths]
     first = steps[0]
-    for path, step in zip(paths[1:], steps[1:]):
+    for path, step in zip(paths[1:], steps[1:], strict=True):
         if step.shape != first.shape:
             raise VolumeFileError(f"{path}: time step of shape {step.shape}, but {paths[0]} is "
                                   f"{first.shape}; every step must have the same shape")

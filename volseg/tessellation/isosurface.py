@@ -203,8 +203,10 @@ def _problem_vertices(simplices: NDArray, n_vertices: int) -> NDArray[np.intp]:
 
 def _moved_off(edges: NDArray, values: NDArray, level: float, points: NDArray) -> NDArray:
     """Edge fractions after moving the samples of `points` (sorted grid points) off the
-    level, away from it, by 1e-3 of their smallest gap across the level: the level set
-    of a slightly perturbed interpolant, so a valid embedding with no flat simplex."""
+    level, away from it, by a tenth of their smallest gap across the level: the level
+    set of a perturbed interpolant, so a valid embedding whose crossings near those
+    points sit at least a few percent of an edge from them (no flat simplex; the
+    slivers are left to `relax_isosurface`)."""
     below, above = values[edges[:, 0]].copy(), values[edges[:, 1]].copy()
     gap = above - below
     eta = np.full(len(points), np.inf)
@@ -214,7 +216,7 @@ def _moved_off(edges: NDArray, values: NDArray, level: float, points: NDArray) -
         hit = points[where] == edges[:, column] if len(points) else np.zeros(len(edges), bool)
         np.minimum.at(eta, where[hit], gap[hit])
         ends.append((where, hit))
-    eta *= 1e-3
+    eta *= 0.1
     (where, hit), (where_up, hit_up) = ends
     below[hit] = np.minimum(below[hit], level - eta[where[hit]])
     above[hit_up] = np.maximum(above[hit_up], level + eta[where_up[hit_up]])
@@ -228,7 +230,7 @@ def _collapse(edges: NDArray, fraction: NDArray, simplices: NDArray, snap: float
     (a critical point of the interpolant at the level) or a flat simplex, the grid
     point is instead moved off the level (`_moved_off`). `positions(edges, fraction)`
     gives vertex coordinates. Returns (edges, fraction, simplices)."""
-    from ..mesh import simplex_volumes
+    from ..mesh import flat_simplices
 
     n_vertices = len(edges)
     point = np.where(fraction >= 1.0 - snap, edges[:, 1],
@@ -252,8 +254,8 @@ def _collapse(edges: NDArray, fraction: NDArray, simplices: NDArray, snap: float
         out_fraction[grid] = 1.0
         problems = _problem_vertices(merged, len(unique)) if len(merged) else np.zeros(0, np.intp)
         if not len(problems) and len(merged):
-            volumes = simplex_volumes(positions(out_edges, out_fraction), merged)
-            problems = np.unique(merged[volumes <= 1e-9 * np.median(volumes)])
+            problems = np.unique(merged[flat_simplices(positions(out_edges, out_fraction),
+                                                       merged)])
         if not len(problems):
             used = np.zeros(len(unique), dtype=bool)
             used[merged.ravel()] = True      # crossings whose simplices all degenerated
@@ -333,7 +335,7 @@ def isosurface(field: ArrayLike, level: float, *, spacing=None, origin=None,
     lowest = np.full(cube_shape, np.inf)
     highest = np.full(cube_shape, -np.inf)
     for corner in itertools.product((0, 1), repeat=d):
-        view = array[tuple(slice(c, c + s) for c, s in zip(corner, cube_shape))]
+        view = array[tuple(slice(c, c + s) for c, s in zip(corner, cube_shape, strict=True))]
         np.minimum(lowest, view, out=lowest)
         np.maximum(highest, view, out=highest)
     cut = np.flatnonzero((lowest < level) & (highest >= level))
