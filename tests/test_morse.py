@@ -149,23 +149,33 @@ def test_bad_input_is_a_clear_error():
 
 
 def test_morse_imports_only_its_kernels_and_the_kuhn_leaf():
-    """morse stays usable on its own: of volseg only `_morse_kernels` and `_kuhn`, which
-    import nothing of volseg themselves."""
+    """morse stays usable on its own: of volseg it imports only `_morse_kernels`, `_kuhn`
+    and its blockwise half `_morse_blocks` (which imports only morse and the kernels);
+    the kernels and `_kuhn` import nothing of volseg themselves."""
     import ast
     import inspect
 
+    import volseg._morse_blocks as blocks
     import volseg.morse as morse
 
-    tree = ast.parse(inspect.getsource(morse))
-    for node in ast.walk(tree):
-        if isinstance(node, ast.ImportFrom) and node.level:
-            assert [a.name for a in node.names] in (["_morse_kernels"], ["_kuhn"]), ast.dump(node)
-        if isinstance(node, ast.Import):
-            assert not any(a.name.startswith("volseg") for a in node.names)
+    family = {"morse", "_morse_kernels", "_kuhn", "_morse_blocks", "_morse_block_kernels"}
+    for module, allowed in ((morse, (["_morse_kernels"], ["_kuhn"], ["dask_descending_complex"])),
+                            (blocks, None)):
+        for node in ast.walk(ast.parse(inspect.getsource(module))):
+            if isinstance(node, ast.ImportFrom) and node.level:
+                names = [a.name for a in node.names]
+                if allowed is not None:
+                    assert names in allowed, ast.dump(node)
+                    assert node.module in (None, "_morse_blocks"), ast.dump(node)
+                else:
+                    assert (node.module or "") in family or set(names) <= family, ast.dump(node)
+            if isinstance(node, ast.Import):
+                assert not any(a.name.startswith("volseg") for a in node.names)
     import volseg._kuhn as kuhn
+    import volseg._morse_block_kernels as block_kernels
     import volseg._morse_kernels as kernels
 
-    for leaf in (kuhn, kernels):
+    for leaf in (kuhn, kernels, block_kernels):
         for node in ast.walk(ast.parse(inspect.getsource(leaf))):
             assert not (isinstance(node, ast.ImportFrom) and node.level), ast.dump(node)
 

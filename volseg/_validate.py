@@ -37,6 +37,18 @@ def volume_array(volume, name: str = "volume", *, source=None,
     return data
 
 
+def lazy_volume_array(array, name: str = "volume"):
+    """`volume_array`'s checks that need no data (3-D, >= 2 per axis, real) for a lazy
+    (Dask) array; finiteness is checked block by block when it is computed."""
+    if array.ndim != 3:
+        raise ValueError(f"`{name}` must be 3-D, got shape {array.shape}")
+    if min(array.shape) < 2:
+        raise ValueError(f"`{name}` needs at least 2 samples along each axis, got shape {array.shape}")
+    if np.dtype(array.dtype).kind not in "biuf":
+        raise ValueError(f"`{name}` must hold real numbers, got dtype {array.dtype}")
+    return array
+
+
 def spacing(value, default=(1.0, 1.0, 1.0)) -> tuple:
     """Three positive finite voxel sizes; a scalar means the same size on every axis."""
     if value is None:

@@ -414,6 +414,13 @@ def descending_complex(field: ArrayLike, *, adjacency=None, connectivity="kuhn",
     """
     from . import _morse_kernels as kernels
 
+    if type(field).__module__.startswith("dask."):
+        if mask is not None or adjacency is not None:
+            raise ValueError("a Dask `field` is segmented on its grid without a mask for now; "
+                             "compute it (numpy) to use `mask` or `adjacency`")
+        from ._morse_blocks import dask_descending_complex
+
+        return dask_descending_complex(field, connectivity)
     phases = _Phases()
     values, mask = _validate_field(field, mask, adjacency)
     graph = _neighbourhood(values, mask, adjacency, connectivity)
@@ -604,6 +611,8 @@ class MorseHierarchy:
             mask, 0 outside it and regions 1..k.
         """
         region = self.region_of_maximum(min_persistence, n_regions)
+        if type(self.cells).__module__.startswith("dask."):   # blockwise: relabel per block
+            return self.cells.map_blocks(lambda cells: region[cells], dtype=region.dtype)
         if self.mask is None:
             return region[self.cells]
         # cells are -1 outside the mask: the table's last entry, 0, labels them.

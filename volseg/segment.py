@@ -69,24 +69,34 @@ class Segmentation:
         return {"min_persistence": self.cut.get("min_persistence"),
                 "n_regions": self.cut.get("n_regions")}
 
+    def _region_tops(self) -> NDArray[np.int64]:
+        """(k,) maximum id of each region's highest maximum."""
+        region = self.hierarchy.region_of_maximum(**self._cut())
+        # Maximum ids run by decreasing value: the first id seen per region is its top.
+        return np.unique(region, return_index=True)[1]
+
     def region_maxima(self) -> NDArray[np.int64]:
         """(k,) flat voxel index of each region's highest curvature maximum (region
         label i + 1 at position i)."""
-        region = self.hierarchy.region_of_maximum(**self._cut())
-        # Maximum ids run by decreasing value: the first id seen per region is its top.
-        seen = np.unique(region, return_index=True)[1]
-        return self.hierarchy.maxima[seen].astype(np.int64)
+        return self.hierarchy.maxima[self._region_tops()].astype(np.int64)
 
     def region_table(self) -> list[dict]:
         """One entry per region: ``label`` (1..k), ``size`` (voxels or vertices),
         ``maximum`` (its highest curvature maximum: [x, y, z] voxel, or the vertex
         index with its ``position`` on a mesh) and ``curvature_at_maximum``."""
-        sizes = np.bincount(self.labels.ravel(), minlength=self.n_regions + 1)
+        if type(self.labels).__module__.startswith("dask."):   # one pass over the blocks
+            import dask.array as da
+
+            sizes = da.bincount(self.labels.ravel(), minlength=self.n_regions + 1).compute()
+        else:
+            sizes = np.bincount(self.labels.ravel(), minlength=self.n_regions + 1)
+        tops = self._region_tops()
         table = []
-        for region, top in enumerate(self.region_maxima(), 1):
-            where = tuple(int(c) for c in np.unravel_index(top, self.labels.shape))
+        for region, (top, value) in enumerate(zip(self.hierarchy.maxima[tops],
+                                                  self.hierarchy.values[tops], strict=True), 1):
+            where = tuple(int(c) for c in np.unravel_index(int(top), self.labels.shape))
             entry = {"label": region, "size": int(sizes[region]), "maximum": list(where),
-                     "curvature_at_maximum": float(self.curvature[where])}
+                     "curvature_at_maximum": float(value)}
             if self.vertices is not None:
                 entry["maximum"] = int(top)
                 entry["position"] = self.vertices[top].tolist()
@@ -146,6 +156,9 @@ def segment_volume(
 
     entry = get_operator(operator)
     min_persistence, n_regions, auto = _cut_request(min_persistence, n_regions)
+    if type(getattr(volume, "data", volume)).__module__.startswith("dask."):
+        return _segment_dask(volume, entry, min_persistence, n_regions, auto, value_scale,
+                             spacing, boundary, mask, smooth)
     spacing = _validate.spacing(spacing, getattr(volume, "spacing", (1.0, 1.0, 1.0)))
     data = _validate.volume_array(volume)
     smooth = _validate.smooth(smooth)
@@ -169,6 +182,36 @@ def segment_volume(
                         spacing, timings, cut, choice, smooth)
 
 
+def _segment_dask(volume, entry, min_persistence, n_regions, auto, value_scale, spacing,
+                  boundary, mask, smooth) -> Segmentation:
+    """`segment_volume` of a Dask array: curvature and Morse stage block by block
+    (DESIGN.md section 10), labels and curvature returned as lazy Dask arrays."""
+    from .curvature import grid_curvature
+    from .masks import MaskChoice
+
+    if mask not in (None, "none") or smooth:
+        raise ValueError("a Dask volume is segmented without a mask or smoothing for now; "
+                         "pass mask=None and smooth=0, or compute it (numpy)")
+    data = getattr(volume, "data", volume)
+    spacing = _validate.spacing(spacing, getattr(volume, "spacing", (1.0, 1.0, 1.0)))
+    check_boundary(boundary)
+    _validate.lazy_volume_array(data)
+    timings = {}
+    start = time.perf_counter()
+    value_scale = _validate.value_scale(default_value_scale(data, spacing)
+                                        if value_scale is None else value_scale)
+    curvature = grid_curvature(data, entry.name, spacing=spacing, value_scale=value_scale,
+                               boundary=boundary)
+    timings["value scale"] = time.perf_counter() - start
+    start = time.perf_counter()
+    hierarchy = descending_complex(curvature)       # computes the curvature block by block
+    timings["curvature and morse"] = time.perf_counter() - start
+    labels, k, threshold, cut = _cut(hierarchy, min_persistence, n_regions, auto, timings)
+    choice = MaskChoice(None, "none", "none", int(np.prod(data.shape)))
+    return Segmentation(labels, curvature, hierarchy, k, entry.name, threshold, value_scale,
+                        spacing, timings, cut, choice, 0.0)
+
+
 def _cut_request(min_persistence, n_regions) -> tuple:
     """(min_persistence, n_regions, auto) from what the caller asked; 30 regions when
     nothing was."""
@@ -188,7 +231,7 @@ def _cut(hierarchy: MorseHierarchy, min_persistence, n_regions, auto, timings) -
     if hierarchy.mask is None:
         labels += 1  # regions 1..k; 0 is kept for voxels outside a mask
     timings["cut"] = time.perf_counter() - start
-    k = int(labels.max())
+    k = int(hierarchy.region_of_maximum(min_persistence, n_regions).max()) + 1
     threshold = float(min_persistence) if min_persistence is not None else hierarchy.threshold_for(k)
     return labels, k, threshold, {"min_persistence": min_persistence, "n_regions": n_regions,
                                   "auto": auto}

@@ -66,8 +66,13 @@ def _intrinsic_slab(fp, i, h, tables, acc):
 
 
 @numba.njit(cache=True, parallel=True)
-def grid_kernel(fp, h, operator, tables, acc):
+def grid_kernel(fp, h, operator, tables, acc, first_parity=0):
     """Accumulate per-vertex sums over the padded grid `fp` into `acc` (m, *fp.shape).
+
+    Slabs of cubes (one x layer each) run in two parallel passes, those of parity
+    `first_parity` first: a block of a larger grid passes the parity of its first slab
+    in the whole grid, so every vertex gets its sums in the same order as in memory
+    (the blockwise result is then bit-identical).
 
     acc[0]: sum psi |tau| (weighted) or sum psi (unweighted); acc[1]: sum |sigma|/4
     (or, for intrinsic, the sum of solid angles); for Laplace-Beltrami acc[2:6] the
@@ -79,7 +84,8 @@ def grid_kernel(fp, h, operator, tables, acc):
     fpf = fp.reshape(-1)
     flat = acc.reshape(acc.shape[0], -1)
     n_slabs = shape[0] - 1
-    for parity in range(2):
+    for turn in range(2):
+        parity = (turn + first_parity) % 2   # the local parity of the global first pass
         for half in numba.prange((n_slabs - parity + 1) // 2):
             i = 2 * half + parity
             if operator == WEIGHTED:

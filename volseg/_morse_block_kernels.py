@@ -1,0 +1,109 @@
+"""Compiled passes of the blockwise Morse build (`volseg._morse_blocks`): one block of a
+3-D field at a time, with a 1-voxel halo; flat, checked arrays, no defaults.
+
+Voxels are named by their global flat index (C order) ``gid``; "higher" is the
+in-memory order, (f(u), gid u) > (f(v), gid v), so every decision a block takes is
+the one the in-memory build takes. The halo holds the neighbours' values (-inf
+outside the volume).
+"""
+
+import numba
+import numpy as np
+
+#: `ascend`'s result for a voxel whose steepest path leaves the block: -1 - gid of the
+#: first voxel outside (always on a neighbouring block's outer layer).
+EXIT = -1
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _gid(i, j, k, origin, shape):
+    return ((origin[0] + i) * shape[1] + (origin[1] + j)) * shape[2] + (origin[2] + k)
+
+
+@numba.njit(cache=True, nogil=True)
+def ascend(halo, origin, shape, offsets, result):
+    """result[i, j, k] for each owned voxel: the gid of the maximum its steepest ascent
+    reaches inside the block, or -1 - gid of the first voxel outside the block on it.
+
+    halo: (a+2, b+2, c+2) float64; origin: global index of owned voxel (0, 0, 0);
+    shape: the volume's shape; offsets: (m, 3) neighbour steps; result: (a, b, c) int64.
+    """
+    a, b, c = result.shape
+    n = a * b * c
+    up = np.empty(n, dtype=np.int64)       # local index, or -1 - gid when outside
+    for i in range(a):
+        for j in range(b):
+            for k in range(c):
+                best_v = halo[i + 1, j + 1, k + 1]
+                best_g = _gid(i, j, k, origin, shape)
+                bi, bj, bk = i, j, k
+                for t in range(offsets.shape[0]):
+                    di, dj, dk = offsets[t, 0], offsets[t, 1], offsets[t, 2]
+                    value = halo[i + 1 + di, j + 1 + dj, k + 1 + dk]
+                    if value == -np.inf:
+                        continue
+                    g = _gid(i + di, j + dj, k + dk, origin, shape)
+                    if value > best_v or (value == best_v and g > best_g):
+                        best_v, best_g, bi, bj, bk = value, g, i + di, j + dj, k + dk
+                own = (i * b + j) * c + k
+                if 0 <= bi < a and 0 <= bj < b and 0 <= bk < c:
+                    up[own] = (bi * b + bj) * c + bk
+                else:
+                    up[own] = -1 - best_g
+    final = np.full(n, np.iinfo(np.int64).min, dtype=np.int64)
+    unknown = np.iinfo(np.int64).min
+    for v in range(n):
+        x = v
+        while final[x] == unknown and up[x] >= 0 and up[x] != x:
+            x = up[x]
+        if final[x] != unknown:
+            answer = final[x]
+        elif up[x] < 0:
+            answer = up[x]
+        else:  # a maximum of the block
+            i, r = divmod(x, b * c)
+            j, k = divmod(r, c)
+            answer = _gid(i, j, k, origin, shape)
+        y = v
+        while final[y] == unknown:
+            final[y] = answer
+            if up[y] < 0 or up[y] == y:
+                break
+            y = up[y]
+    for v in range(n):
+        i, r = divmod(v, b * c)
+        j, k = divmod(r, c)
+        result[i, j, k] = final[v]
+
+
+@numba.njit(cache=True, nogil=True)
+def cross_pairs(halo_values, halo_cells, origin, shape, offsets, out_a, out_b, out_v, out_f):
+    """Every edge (u, w), u owned, with cell(u) < cell(w): (cell u, cell w, saddle gid,
+    saddle value), the saddle being the edge's lower end. Writes the first len(out_a)
+    and returns how many there are."""
+    a = halo_cells.shape[0] - 2
+    b = halo_cells.shape[1] - 2
+    c = halo_cells.shape[2] - 2
+    n = 0
+    for i in range(a):
+        for j in range(b):
+            for k in range(c):
+                cu = halo_cells[i + 1, j + 1, k + 1]
+                fu = halo_values[i + 1, j + 1, k + 1]
+                gu = _gid(i, j, k, origin, shape)
+                for t in range(offsets.shape[0]):
+                    di, dj, dk = offsets[t, 0], offsets[t, 1], offsets[t, 2]
+                    cw = halo_cells[i + 1 + di, j + 1 + dj, k + 1 + dk]
+                    if cw <= cu:   # the same cell, a smaller one (seen from there), outside
+                        continue
+                    fw = halo_values[i + 1 + di, j + 1 + dj, k + 1 + dk]
+                    gw = _gid(i + di, j + dj, k + dk, origin, shape)
+                    if n < len(out_a):
+                        if fu > fw or (fu == fw and gu > gw):
+                            out_v[n], out_f[n] = gw, fw
+                        else:
+                            out_v[n], out_f[n] = gu, fu
+                        out_a[n] = cu
+                        out_b[n] = cw
+                    n += 1
+    return n

@@ -1,0 +1,201 @@
+"""`descending_complex` of a 3-D Dask array: the in-memory build, block by block
+(DESIGN.md section 10).
+
+1. Per block, with a 1-voxel halo (-inf outside the volume): steepest ascent and path
+   compression inside the block (`_morse_block_kernels.ascend`). A path ends at a
+   maximum of the block or leaves it; a path that leaves lands on a neighbouring
+   block's outer layer. Each block returns its maxima and the ends of its outer
+   layer's paths, a few percent of its voxels.
+2. On the client: the outer-layer ends are resolved to maxima by pointer jumping
+   (the chains follow strictly rising values, so they end), and the maxima are
+   numbered by decreasing (value, index), as in memory.
+3. Per block again: cells = maximum id of each voxel (the ascent is recomputed rather
+   than kept, so no block-sized intermediate outlives its task).
+4. Per block, cells and values with a halo: every edge between two cells with its
+   lower end as saddle, reduced to the highest saddle per pair of cells.
+5. On the client: the highest saddle per pair over all blocks, the in-memory sort
+   (value, saddle index, pair) and the same Kruskal: the same maxima, events and
+   persistence as in memory, for any chunking (tested).
+
+The returned `MorseHierarchy` holds the per-maximum data and the events in memory and
+its `cells` as a lazy Dask array; `segment` relabels block by block.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import _morse_block_kernels as kernels
+
+__all__ = ["dask_descending_complex"]
+
+
+def _origins(chunks) -> list:
+    starts = [np.concatenate([[0], np.cumsum(c)[:-1]]) for c in chunks]
+    return starts
+
+
+def _ascend(halo, origin, shape, offsets):
+    result = np.empty(tuple(s - 2 for s in halo.shape), dtype=np.int64)
+    values = np.ascontiguousarray(halo, dtype=np.float64)
+    if np.isnan(values).any() or np.isposinf(values).any():
+        raise ValueError("`field` holds NaN or infinite values")
+    kernels.ascend(values, np.asarray(origin, dtype=np.int64), np.asarray(shape, dtype=np.int64),
+                   offsets, result)
+    return result, values
+
+
+def _outer_layer(block):
+    """Flat local indices of a block's outer layer (its voxels next to other blocks)."""
+    mask = np.zeros(block.shape, dtype=bool)
+    for axis in range(3):
+        index = [slice(None)] * 3
+        for end in (0, -1):
+            index[axis] = end
+            mask[tuple(index)] = True
+    return np.flatnonzero(mask)
+
+
+def _summary_of_block(halo, origin, shape, offsets):
+    """Stage 1: (maxima gids, their values, outer-layer gids, their path ends)."""
+    result, values = _ascend(halo, origin, shape, offsets)
+    a, b, c = result.shape
+    local = np.arange(result.size).reshape(result.shape)
+    gids = ((origin[0] + local // (b * c)) * shape[1] + origin[1] + (local // c) % b) * shape[2] \
+        + origin[2] + local % c
+    flat = result.ravel()
+    is_max = flat == gids.ravel()
+    inner = values[1:-1, 1:-1, 1:-1].ravel()
+    layer = _outer_layer(result)
+    return (gids.ravel()[is_max], inner[is_max], gids.ravel()[layer], flat[layer])
+
+
+def _resolve(keys, ends):
+    """Pointer jumping: each outer-layer voxel's end resolved to a maximum gid."""
+    order = np.argsort(keys)
+    keys, ends = keys[order], ends[order].copy()
+    for _ in range(64):
+        leaving = ends < 0
+        if not leaving.any():
+            return keys, ends
+        where = np.searchsorted(keys, -1 - ends[leaving])
+        ends[leaving] = ends[where]
+    raise RuntimeError("blockwise Morse: path ends did not resolve (a bug)")
+
+
+def _cells_of_block(halo, origin, shape, offsets, layer_keys, layer_ends, maxima_sorted,
+                    maxima_ids):
+    """Stage 3: the maximum id of every owned voxel."""
+    result, _ = _ascend(halo, origin, shape, offsets)
+    flat = result.ravel()
+    leaving = flat < 0
+    if leaving.any():
+        flat = flat.copy()
+        flat[leaving] = layer_ends[np.searchsorted(layer_keys, -1 - flat[leaving])]
+    ids = maxima_ids[np.searchsorted(maxima_sorted, flat)]
+    return ids.reshape(result.shape)
+
+
+def _pairs_of_block(halo_values, halo_cells, origin, shape, offsets):
+    """Stage 4: (a, b, saddle gid, saddle value), the highest saddle per cell pair."""
+    values = np.ascontiguousarray(halo_values, dtype=np.float64)
+    cells = np.ascontiguousarray(halo_cells, dtype=np.int64)
+    room = int(np.prod([s - 2 for s in halo_cells.shape])) // 2 + 1024
+    while True:   # room for one cross edge per two voxels, rerun with exact room if short
+        out = [np.empty(room, dtype=np.int64), np.empty(room, dtype=np.int64),
+               np.empty(room, dtype=np.int64), np.empty(room, dtype=np.float64)]
+        n = kernels.cross_pairs(values, cells, np.asarray(origin, dtype=np.int64),
+                                np.asarray(shape, dtype=np.int64), offsets, *out)
+        if n <= room:
+            return _highest_per_pair(*(x[:n] for x in out))
+        room = n
+
+
+def _highest_per_pair(a, b, v, f):
+    """One row per (a, b): the highest (value, gid) saddle."""
+    if not len(a):
+        return a, b, v, f
+    order = np.lexsort((v, f, b, a))
+    a, b, v, f = a[order], b[order], v[order], f[order]
+    last = np.r_[(a[1:] != a[:-1]) | (b[1:] != b[:-1]), True]
+    return a[last], b[last], v[last], f[last]
+
+
+def dask_descending_complex(field, connectivity="kuhn", scheduler=None):
+    """`descending_complex` of a 3-D Dask array (see the module docstring)."""
+    import dask
+    import dask.array as da
+
+    from . import _morse_kernels
+    from .morse import MorseHierarchy, _Phases, grid_offsets
+
+    if field.ndim != 3:
+        raise ValueError(f"a Dask `field` must be 3-D, got shape {field.shape}")
+    if np.dtype(field.dtype).kind not in "biuf":
+        raise ValueError(f"`field` must hold real numbers, got dtype {field.dtype}")
+    if field.size == 0:
+        raise ValueError("`field` is empty")
+    phases = _Phases()
+    shape = np.array(field.shape, dtype=np.int64)
+    offsets = np.ascontiguousarray(grid_offsets(3, connectivity), dtype=np.int64)
+    values = field.astype(np.float64)
+    halo = da.overlap.overlap(values, depth=1, boundary=-np.inf)
+    starts = _origins(values.chunks)
+    blocks = halo.to_delayed()
+    index = list(np.ndindex(*blocks.shape))
+    origin = {ijk: np.array([starts[d][ijk[d]] for d in range(3)]) for ijk in index}
+
+    summaries = dask.compute(*[dask.delayed(_summary_of_block)(blocks[ijk], origin[ijk], shape,
+                                                               offsets) for ijk in index],
+                             scheduler=scheduler)
+    phases.done("blocks: steepest ascent, path compression")
+    maxima = np.concatenate([s[0] for s in summaries])
+    maxima_values = np.concatenate([s[1] for s in summaries])
+    layer_keys, layer_ends = _resolve(np.concatenate([s[2] for s in summaries]),
+                                      np.concatenate([s[3] for s in summaries]))
+    del summaries
+    order = np.lexsort((maxima, maxima_values))[::-1]       # decreasing (value, index)
+    maxima, maxima_values = maxima[order], maxima_values[order]
+    index_type = np.int32 if len(maxima) < 2**31 - 1 else np.int64
+    by_gid = np.argsort(maxima)
+    maxima_sorted, maxima_ids = maxima[by_gid], by_gid.astype(index_type)
+    phases.done("client: exits resolved, maxima ordered")
+
+    tables = dask.delayed((layer_keys, layer_ends, maxima_sorted, maxima_ids), pure=True)
+    cell_blocks = np.empty(blocks.shape, dtype=object)
+    for ijk in index:
+        cells = dask.delayed(lambda h, o, t: _cells_of_block(h, o, shape, offsets, *t))(
+            blocks[ijk], origin[ijk], tables)
+        cell_blocks[ijk] = da.from_delayed(cells, tuple(values.chunks[d][ijk[d]] for d in range(3)),
+                                           dtype=index_type)
+    cells = da.block(cell_blocks.tolist())
+    halo_cells = da.overlap.overlap(cells.astype(np.int64), depth=1, boundary=-1).to_delayed()
+    pairs = dask.compute(*[dask.delayed(_pairs_of_block)(blocks[ijk], halo_cells[ijk], origin[ijk],
+                                                         shape, offsets) for ijk in index],
+                         scheduler=scheduler)
+    phases.done("blocks: cells and cross-cell edges")
+    edge_a, edge_b, edge_v, edge_f = _highest_per_pair(
+        *(np.concatenate([p[k] for p in pairs]) for k in range(4)))
+    del pairs
+    edge_a = edge_a.astype(index_type)
+    edge_b = edge_b.astype(index_type)
+    order = np.argsort(edge_f)
+    _morse_kernels.break_ties(order, edge_f[order], edge_v, edge_a, edge_b)
+    sorted_edges = [edge_a[order], edge_b[order], edge_v[order]]
+    n_maxima = len(maxima)
+    out = [np.empty(max(n_maxima - 1, 0), dtype=t) for t in (np.int32, np.int32, np.int32, np.int64)]
+    n_events = _morse_kernels.kruskal(*sorted_edges, n_maxima, *out)
+    young, elder, target, saddle = (x[:n_events].copy() for x in out)
+    phases.done("client: saddle order, union-find")
+    saddle_values = _values_at(edge_v, edge_f, saddle)
+    return MorseHierarchy(
+        shape=tuple(int(s) for s in shape), cells=cells, maxima=maxima.astype(np.int64),
+        values=maxima_values, young=young, elder=elder, target=target, saddle=saddle,
+        saddle_value=saddle_values, mask=None, _field=field, _connectivity=connectivity,
+        timings=phases.times)
+
+
+def _values_at(gids, values, wanted):
+    """The value of each `wanted` gid, looked up among the saddles' (gid, value)."""
+    order = np.argsort(gids)
+    return values[order][np.searchsorted(gids[order], wanted)]
