@@ -121,9 +121,22 @@ def _highest_per_pair(a, b, v, f):
     return a[last], b[last], v[last], f[last]
 
 
-def dask_descending_complex(field, connectivity="kuhn", scheduler=None):
+def _per_block(function, *arrays, **kwargs):
+    """Run `function(*blocks, block_id=...)` on every block and return its results, one
+    object per block, as an (object) array of the block grid, through `map_blocks` (one
+    small graph: no per-block copy of it, which `to_delayed` would make)."""
+    import dask.array as da
+
+    def wrapped(*blocks, block_id=None):
+        out = np.empty((1,) * blocks[0].ndim, dtype=object)
+        out[(0,) * blocks[0].ndim] = function(*blocks, block_id=block_id, **kwargs)
+        return out
+    return da.map_blocks(wrapped, *arrays, dtype=object,
+                         chunks=tuple((1,) * len(c) for c in arrays[0].chunks), meta=np.empty((0,) * 3, object))
+
+
+def dask_descending_complex(field, connectivity="kuhn"):
     """`descending_complex` of a 3-D Dask array (see the module docstring)."""
-    import dask
     import dask.array as da
 
     from . import _morse_kernels
@@ -141,13 +154,13 @@ def dask_descending_complex(field, connectivity="kuhn", scheduler=None):
     values = field.astype(np.float64)
     halo = da.overlap.overlap(values, depth=1, boundary=-np.inf)
     starts = _origins(values.chunks)
-    blocks = halo.to_delayed()
-    index = list(np.ndindex(*blocks.shape))
-    origin = {ijk: np.array([starts[d][ijk[d]] for d in range(3)]) for ijk in index}
 
-    summaries = dask.compute(*[dask.delayed(_summary_of_block)(blocks[ijk], origin[ijk], shape,
-                                                               offsets) for ijk in index],
-                             scheduler=scheduler)
+    def origin(block_id):
+        return np.array([starts[d][block_id[d]] for d in range(3)], dtype=np.int64)
+
+    summaries = _per_block(lambda h, block_id: _summary_of_block(h, origin(block_id), shape,
+                                                                 offsets), halo).compute()
+    summaries = list(summaries.ravel())
     phases.done("blocks: steepest ascent, path compression")
     maxima = np.concatenate([s[0] for s in summaries])
     maxima_values = np.concatenate([s[1] for s in summaries])
@@ -161,18 +174,15 @@ def dask_descending_complex(field, connectivity="kuhn", scheduler=None):
     maxima_sorted, maxima_ids = maxima[by_gid], by_gid.astype(index_type)
     phases.done("client: exits resolved, maxima ordered")
 
-    tables = dask.delayed((layer_keys, layer_ends, maxima_sorted, maxima_ids), pure=True)
-    cell_blocks = np.empty(blocks.shape, dtype=object)
-    for ijk in index:
-        cells = dask.delayed(lambda h, o, t: _cells_of_block(h, o, shape, offsets, *t))(
-            blocks[ijk], origin[ijk], tables)
-        cell_blocks[ijk] = da.from_delayed(cells, tuple(values.chunks[d][ijk[d]] for d in range(3)),
-                                           dtype=index_type)
-    cells = da.block(cell_blocks.tolist())
-    halo_cells = da.overlap.overlap(cells.astype(np.int64), depth=1, boundary=-1).to_delayed()
-    pairs = dask.compute(*[dask.delayed(_pairs_of_block)(blocks[ijk], halo_cells[ijk], origin[ijk],
-                                                         shape, offsets) for ijk in index],
-                         scheduler=scheduler)
+    def cells_of(h, block_id=None):
+        return _cells_of_block(h, origin(block_id), shape, offsets, layer_keys, layer_ends,
+                               maxima_sorted, maxima_ids)
+
+    cells = halo.map_blocks(cells_of, dtype=index_type, chunks=values.chunks)
+    halo_cells = da.overlap.overlap(cells.astype(np.int64), depth=1, boundary=-1)
+    pairs = _per_block(lambda h, c, block_id: _pairs_of_block(h, c, origin(block_id), shape,
+                                                              offsets), halo, halo_cells).compute()
+    pairs = list(pairs.ravel())
     phases.done("blocks: cells and cross-cell edges")
     edge_a, edge_b, edge_v, edge_f = _highest_per_pair(
         *(np.concatenate([p[k] for p in pairs]) for k in range(4)))

@@ -58,6 +58,9 @@ def _get_parser() -> argparse.ArgumentParser:
                      "none); 1 tames the checkerboard of 8-bit data")
     seg.add_argument("--plot-persistence", action="store_true",
                      help="also write <name>_persistence.png, the persistence curve alone")
+    seg.add_argument("--chunks", type=int, metavar="N",
+                     help="segment block by block in chunks of N^3 voxels (the blockwise path, "
+                     "always taken for Zarr input): labels and curvature are written as .zarr")
     seg.add_argument("--shape", type=int, nargs=3, metavar=("X", "Y", "Z"))
     seg.add_argument("--dtype", help="voxel type of raw input (uint8, uint16, float32, ...)")
     seg.add_argument("--value-scale", type=float, metavar="S",
@@ -184,8 +187,33 @@ def _output_sets(volumes, out_dir, *, force, wait, persistence_plot=False):
                 f"{seen[volume.name]} and {volume.path or volume.name} would both write "
                 f"{out_dir / volume.name}_*; segment them into different folders")
         seen[volume.name] = volume.path or volume.name
-    return [OutputSet(out_dir, v.name, output_names(v.name, persistence_plot), force=force,
-                      wait=wait) for v in volumes]
+    return [OutputSet(out_dir, v.name, output_names(v.name, persistence_plot, _is_lazy(v)),
+                      force=force, wait=wait) for v in volumes]
+
+
+def _is_lazy(volume) -> bool:
+    return type(volume.data).__module__.startswith("dask.")
+
+
+def _blockwise_mask(data, mask):
+    """The mask rule of a lazy volume: none, or 'auto' resolved to none (the blockwise
+    Morse stage has no masks yet)."""
+    from .masks import AUTO_PLATEAU_SHARE
+
+    if mask in (None, "none"):
+        return None
+    if mask == "auto":
+        import dask
+
+        lowest, = dask.compute(data.min())
+        share, = dask.compute((data == lowest).mean())
+        if share <= AUTO_PLATEAU_SHARE:
+            return None
+        raise UsageError(f"{share:.1%} of the volume is its minimum value, which --mask auto "
+                         "would mask, and the blockwise path has no masks yet; pass --mask none "
+                         "to segment every voxel, or drop --chunks for a volume that fits in memory")
+    raise UsageError(f"--mask {mask} is not available on the blockwise path yet (Zarr input or "
+                     "--chunks); use --mask none")
 
 
 def segment_to_files(volume, outputs, *, operator="weighted", n_regions=None,
@@ -198,6 +226,14 @@ def segment_to_files(volume, outputs, *, operator="weighted", n_regions=None,
 
     started = time.perf_counter()
     name = volume.name
+    if _is_lazy(volume):
+        from .blockwise import segment_to_zarr
+
+        if noise or smooth:
+            raise UsageError("--noise and --smooth need the volume in memory; drop --chunks")
+        _blockwise_mask(volume.data, mask)
+        return segment_to_zarr(volume, outputs, operator=operator, n_regions=n_regions,
+                               min_persistence=min_persistence, value_scale=value_scale, say=say)
     data = np.asarray(volume)
     if noise:
         data = add_value_noise(data, noise, seed=seed)
@@ -217,6 +253,21 @@ def segment_to_files(volume, outputs, *, operator="weighted", n_regions=None,
     if result.mask.mask is not None:
         title += f", mask {result.mask.used}"
     return write_segmentation(outputs, result, data, info, frame=volume.frame, title=title)
+
+
+def _chunked(volume, size):
+    """`volume` with its data as a Dask array of `size`^3 chunks (clipped to the shape)."""
+    import dask.array as da
+
+    from .io import Volume
+
+    if any(size > n for n in volume.shape):
+        raise UsageError(f"--chunks {size} is larger than the volume {volume.path or volume.name} "
+                         f"along an axis (shape {volume.shape}); use at most {min(volume.shape)}")
+    data = volume.data if _is_lazy(volume) else da.from_array(np.asarray(volume.data),
+                                                              chunks=size)
+    return Volume(data.rechunk(size), frame=volume.frame, name=volume.name,
+                  source=volume.source, path=volume.path, files=volume.files)
 
 
 def _tagged(say, tag):
@@ -251,6 +302,10 @@ def _cmd_segment(args):
     # Read and check every input before writing or computing anything.
     volumes = [_load(name, args.shape, args.dtype, args.allow_external_data)
                for name in args.inputs]
+    if args.chunks is not None:
+        if args.chunks < 2:
+            raise UsageError(f"--chunks must be at least 2 voxels, got {args.chunks}")
+        volumes = [_chunked(v, args.chunks) for v in volumes]
     _check_out_dir(out_dir)
     mask = args.mask if args.mask_threshold is None else f"value>{args.mask_threshold!r}"
     summaries = _segment_all(

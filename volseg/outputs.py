@@ -26,10 +26,16 @@ OUTPUT_SUFFIXES = {"labels": "_labels.nii.gz", "curvature": "_curvature.nii.gz",
                    "summary": "_summary.json", "preview": "_preview.png"}
 
 
-def output_names(stem: str, persistence_plot: bool = False) -> dict:
+#: The blockwise path's labels and curvature: chunked Zarr stores, never whole in memory.
+BLOCKWISE_SUFFIXES = {"labels": "_labels.zarr", "curvature": "_curvature.zarr"}
+
+
+def output_names(stem: str, persistence_plot: bool = False, blockwise: bool = False) -> dict:
     """Kind -> file name of the outputs of `stem` (with ``<stem>_persistence.png``
-    when `persistence_plot`)."""
+    when `persistence_plot`; labels and curvature as ``.zarr`` when `blockwise`)."""
     names = {kind: stem + suffix for kind, suffix in OUTPUT_SUFFIXES.items()}
+    if blockwise:
+        names.update({kind: stem + suffix for kind, suffix in BLOCKWISE_SUFFIXES.items()})
     if persistence_plot:
         names["persistence"] = f"{stem}_persistence.png"
     return names
@@ -46,7 +52,11 @@ def files_sha256(paths) -> str | None:
     if not paths:
         return None
     digest = hashlib.sha256()
-    for path in paths:
+    expanded = []
+    for path in paths:   # a Zarr store is a folder: its files, in name order
+        path = Path(path)
+        expanded += sorted(p for p in path.rglob("*") if p.is_file()) if path.is_dir() else [path]
+    for path in expanded:
         with open(path, "rb") as handle:
             for block in iter(lambda h=handle: h.read(1 << 20), b""):
                 digest.update(block)
@@ -119,7 +129,7 @@ def write_segmentation(outputs: OutputSet, result, values, info: dict, *, frame:
 
     frame = frame or Frame.from_spacing(result.spacing)
     info = {**info, "outputs": {kind: str(path) for kind, path in outputs.targets.items()}}
-    label_type = np.min_scalar_type(max(int(result.labels.max()), 0))
+    label_type = np.min_scalar_type(max(int(result.n_regions), 0))
     hierarchy = result.hierarchy
     curve = (hierarchy.event_persistence, hierarchy.n_components, result.min_persistence)
 

@@ -193,18 +193,30 @@ def write_preview(path, volume, curvature, labels, *, title="", persistence=None
     """
     from PIL import Image, ImageDraw
 
-    volume, curvature, labels = np.asarray(volume), np.asarray(curvature), np.asarray(labels)
-    k = int(labels.max()) if labels.size else 0
-    lo, hi = float(volume.min()), float(volume.max())
-    mids = [np.take(curvature, n // 2, axis=a) for a, n in enumerate(curvature.shape)]
+    shape = tuple(volume.shape)
+    indices = []
+    for row in range(3):
+        index = [slice(None)] * 3
+        index[row] = shape[row] // 2
+        indices.append(tuple(index))
+    # Only the three mid slices are read: a lazy (Dask, Zarr) volume is never loaded whole.
+    sliced = [[np.asarray(a[index]) for index in indices] for a in (volume, curvature, labels)]
+    if type(volume).__module__.startswith("dask."):
+        import dask
+
+        lo, hi, k = (float(v) for v in dask.compute(volume.min(), volume.max(), labels.max()))
+        k = int(k)
+    else:
+        volume, labels = np.asarray(volume), np.asarray(labels)
+        k = int(labels.max()) if labels.size else 0
+        lo, hi = float(volume.min()), float(volume.max())
+    mids = sliced[1]
     limit = float(np.percentile(np.abs(np.concatenate([m.ravel() for m in mids])), 99)) or 1.0
 
     rows = []
     for row, axis in enumerate("xyz"):
-        index = [slice(None)] * 3
-        index[row] = volume.shape[row] // 2
-        index = tuple(index)
-        vol, cur, lab = volume[index].T, curvature[index].T, labels[index].T
+        index = indices[row]
+        vol, cur, lab = sliced[0][row].T, sliced[1][row].T, sliced[2][row].T
         panels = [("volume", gray(vol, lo, hi)), ("curvature", diverging(cur, limit)),
                   ("regions", overlay(vol, lab, lo, hi))]
         rows.append((axis, index[row], [(name, _fit(rgb)) for name, rgb in panels]))

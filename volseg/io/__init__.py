@@ -3,7 +3,8 @@ input's frame, and the all-or-nothing writer of a result's output files.
 
 - `read_volume` -> `Volume` (array [x, y, z] + `Frame`); `VolumeFileError` for
   every malformed input;
-- `write_volume` (NIfTI, NRRD, .npy, raw), atomically;
+- `write_volume` (NIfTI, NRRD, .npy, raw), atomically; `read_zarr` / `write_zarr`
+  for volumes larger than memory (lazy, block by block);
 - `OutputSet`: lock, check, stage and commit the files of one result.
 """
 
@@ -11,6 +12,8 @@ from .output_set import FolderLock, OutputError, OutputSet, recover
 from .readers import DTYPES, read_volume
 from .volume import Frame, Volume, VolumeFileError
 from .writers import atomic_path, write_volume
+from .zarr_store import read_zarr, write_zarr
 
 __all__ = ["Volume", "Frame", "VolumeFileError", "read_volume", "write_volume", "atomic_path",
-           "OutputSet", "OutputError", "FolderLock", "recover", "DTYPES"]
+           "OutputSet", "OutputError", "FolderLock", "recover", "DTYPES", "read_zarr",
+           "write_zarr"]

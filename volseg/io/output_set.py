@@ -180,14 +180,16 @@ class OutputSet:
         self._lock.release()
 
     def check(self):
-        """Refuse targets that exist (without `force`) or are not regular files."""
+        """Refuse targets that exist (without `force`) or are not regular files (a
+        ``.zarr`` target is a folder: a folder is accepted there, nothing else)."""
         existing = []
         for path in self.targets.values():
             try:
                 mode = os.lstat(path).st_mode
             except FileNotFoundError:
                 continue
-            if not stat.S_ISREG(mode):
+            folder_ok = path.name.endswith(".zarr") and stat.S_ISDIR(mode)
+            if not stat.S_ISREG(mode) and not folder_ok:
                 raise OutputError(f"{path}: exists and is not a regular file; "
                                   "move it away (volseg replaces only files it wrote)")
             existing.append(path)
@@ -208,7 +210,8 @@ class OutputSet:
             (staging / "old").mkdir()
             paths = {kind: staging / "new" / t.name for kind, t in self.targets.items()}
             write(paths)
-            missing = [str(p.name) for p in paths.values() if not p.is_file()]
+            missing = [str(p.name) for p in paths.values()
+                       if not (p.is_file() or (p.name.endswith(".zarr") and p.is_dir()))]
             if missing:
                 raise RuntimeError(f"the writer did not write {', '.join(missing)}")
             self.check()  # nothing appeared meanwhile (the lock keeps volseg out, not others)

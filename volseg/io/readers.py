@@ -337,7 +337,9 @@ def read_volume(path, *, shape=None, dtype=None, byte_order=None,
     path : str or Path
         ``.raw`` (shape and dtype from a name like ``fuel_64x64x64_uint8.raw``, or
         given), ``.dat`` (Volvis text header, or the old binary header of three
-        uint16 sizes), ``.nrrd`` / ``.nhdr``, ``.nii`` / ``.nii.gz``, ``.npy``.
+        uint16 sizes), ``.nrrd`` / ``.nhdr``, ``.nii`` / ``.nii.gz``, ``.npy``, or a
+        Zarr store (an array, or an OME-Zarr image's level 0): read lazily, the
+        Volume's data is then a Dask array (`volseg.io.zarr_store`).
     shape : (3,) tuple of int, optional
         (X, Y, Z), x fastest; overrides what the name or header says.
     dtype : str, optional
@@ -377,6 +379,10 @@ def read_volume(path, *, shape=None, dtype=None, byte_order=None,
         shape = tuple(int(s) for s in shape)
         if len(shape) != 3 or min(shape) < 1:
             raise ValueError(f"`shape` must be three positive sizes (X, Y, Z), got {shape}")
+    from .zarr_store import is_zarr, read_zarr
+
+    if is_zarr(path):
+        return read_zarr(path)   # lazy: a Dask array over the store's chunks
     regular_file_size(path)  # missing, a folder, a device or a pipe: refused before opening
     try:
         data, frame, short, source, files = _reader(path)(path, shape, dtype, byte_order,

@@ -1,0 +1,135 @@
+"""Zarr in and out, and `volseg segment` on the blockwise path (Zarr input or --chunks):
+the same labels as in memory, checked inputs, nothing half-written."""
+
+import json
+import os
+
+import dask
+import nibabel
+import numpy as np
+import pytest
+import zarr
+
+from volseg.cli import main
+from volseg.io import Frame, VolumeFileError, read_volume, write_zarr
+
+from .conftest import smooth_random_field
+
+
+@pytest.fixture(autouse=True)
+def _synchronous():
+    with dask.config.set(scheduler="synchronous"):
+        yield
+
+
+@pytest.fixture
+def volume():
+    field = smooth_random_field((24, 21, 18), np.random.default_rng(4), sigma=2.0)
+    return (field * 400 + 128).clip(0, 255).astype(np.uint8)
+
+
+def test_write_and_read_back_with_frame(tmp_path, volume):
+    frame = Frame.from_spacing((0.5, 1.0, 2.0))
+    write_zarr(tmp_path / "v.zarr", volume, frame=frame, chunks=(7, 21, 5))
+    back = read_volume(tmp_path / "v.zarr")
+    assert back.shape == volume.shape and back.spacing == (0.5, 1.0, 2.0)
+    assert type(back.data).__module__.startswith("dask")
+    assert back.data.chunks[0] == (7, 7, 7, 3)
+    assert np.array_equal(back.data.compute(), volume)
+
+
+def test_ome_zarr_level_0_is_reordered_to_xyz(tmp_path):
+    group = zarr.open_group(str(tmp_path / "img.zarr"), mode="w")
+    data = np.arange(6 * 5 * 4, dtype=np.float32).reshape(1, 6, 5, 4)
+    array = group.create_array("0", shape=data.shape, chunks=(1, 3, 5, 4), dtype="float32")
+    array[:] = data
+    group.attrs["multiscales"] = [{
+        "version": "0.4",
+        "axes": [{"name": n} for n in ("c", "z", "y", "x")],
+        "datasets": [{"path": "0", "coordinateTransformations": [
+            {"type": "scale", "scale": [1.0, 2.0, 0.5, 0.25]}]}]}]
+    volume = read_volume(tmp_path / "img.zarr")
+    assert volume.shape == (4, 5, 6) and volume.spacing == (0.25, 0.5, 2.0)
+    assert np.array_equal(volume.data.compute(), data[0].transpose(2, 1, 0))
+
+
+def test_bad_stores_are_refused_with_the_reason(tmp_path, volume):
+    flat = zarr.create_array(str(tmp_path / "flat.zarr"), shape=(5, 5), chunks=(5, 5), dtype="f4")
+    flat[:] = 1
+    with pytest.raises(VolumeFileError, match="2-D"):
+        read_volume(tmp_path / "flat.zarr")
+    group = zarr.open_group(str(tmp_path / "group.zarr"), mode="w")
+    group.create_array("a", shape=(3, 3, 3), dtype="f4")
+    with pytest.raises(VolumeFileError, match="multiscales"):
+        read_volume(tmp_path / "group.zarr")
+    write_zarr(tmp_path / "holes.zarr", volume, chunks=(8, 8, 8))
+    chunk_files = sorted(p for p in (tmp_path / "holes.zarr" / "c").rglob("*") if p.is_file())
+    chunk_files[3].unlink()
+    with pytest.raises(VolumeFileError, match="1 of 27 chunks are missing"):
+        read_volume(tmp_path / "holes.zarr")
+    write_zarr(tmp_path / "bad.zarr", volume, chunks=(8, 8, 8))
+    sorted(p for p in (tmp_path / "bad.zarr" / "c").rglob("*") if p.is_file())[5].write_bytes(b"junk")
+    lazy = read_volume(tmp_path / "bad.zarr")            # opens: the chunk is read later
+    with pytest.raises(VolumeFileError, match=r"chunk at \[.*\] is unreadable"):
+        lazy.data.compute()
+
+
+def test_cli_zarr_in_zarr_out_equals_in_memory(tmp_path, volume, capsys):
+    write_zarr(tmp_path / "vol.zarr", volume, chunks=(10, 9, 7))
+    np.save(tmp_path / "vol.npy", volume)
+    assert main(["segment", str(tmp_path / "vol.zarr"), "-o", str(tmp_path / "z"), "--regions",
+                 "9", "-q"]) == 0
+    assert main(["segment", str(tmp_path / "vol.npy"), "-o", str(tmp_path / "m"), "--regions",
+                 "9", "--mask", "none", "-q"]) == 0
+    blockwise = zarr.open(str(tmp_path / "z" / "vol_labels.zarr"), mode="r")[:]
+    in_memory = np.asanyarray(nibabel.load(tmp_path / "m" / "vol_labels.nii.gz").dataobj)
+    assert np.array_equal(blockwise, in_memory)
+    curvature = zarr.open(str(tmp_path / "z" / "vol_curvature.zarr"), mode="r")[:]
+    assert curvature.dtype == np.float64       # what the Morse stage read, exactly
+    assert np.array_equal(curvature.astype(np.float32),
+                          np.asanyarray(nibabel.load(tmp_path / "m" / "vol_curvature.nii.gz").dataobj))
+    a = json.loads((tmp_path / "z" / "vol_summary.json").read_text())
+    b = json.loads((tmp_path / "m" / "vol_summary.json").read_text())
+    assert a["regions"] == b["regions"] and a["n_maxima"] == b["n_maxima"]
+    assert a["persistence"] == b["persistence"]
+    # --chunks takes the same path for any input; outputs are refused, then replaced.
+    assert main(["segment", str(tmp_path / "vol.npy"), "-o", str(tmp_path / "z2"), "--regions",
+                 "9", "--chunks", "9", "-q"]) == 0
+    assert np.array_equal(zarr.open(str(tmp_path / "z2" / "vol_labels.zarr"), mode="r")[:], in_memory)
+    capsys.readouterr()
+    assert main(["segment", str(tmp_path / "vol.zarr"), "-o", str(tmp_path / "z"), "-q"]) == 2
+    assert "exists" in capsys.readouterr().err
+    assert main(["segment", str(tmp_path / "vol.zarr"), "-o", str(tmp_path / "z"), "--regions", "4",
+                 "--force", "-q"]) == 0
+    assert zarr.open(str(tmp_path / "z" / "vol_labels.zarr"), mode="r")[:].max() == 4
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["--chunks", "0"], "--chunks must be at least 2"),
+    (["--chunks", "99"], "larger than the volume"),
+    (["--chunks", "8", "--mask", "otsu"], "not available on the blockwise path"),
+    (["--chunks", "8", "--noise", "1"], "need the volume in memory"),
+])
+def test_cli_blockwise_bad_arguments_exit_2_and_write_nothing(tmp_path, volume, capsys, extra,
+                                                              message):
+    np.save(tmp_path / "vol.npy", volume)
+    out = tmp_path / "out"
+    assert main(["segment", str(tmp_path / "vol.npy"), "-o", str(out), *extra]) == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1
+    assert not out.exists() or not [p for p in os.listdir(out) if not p.startswith(".")]
+
+
+def test_cli_blockwise_refuses_auto_mask_on_a_plateau_and_a_corrupt_chunk(tmp_path, volume, capsys):
+    empty = volume.copy()
+    empty[:, :, :12] = 0
+    write_zarr(tmp_path / "empty.zarr", empty, chunks=(8, 8, 8))
+    assert main(["segment", str(tmp_path / "empty.zarr"), "-o", str(tmp_path / "o")]) == 2
+    assert "--mask none" in capsys.readouterr().err
+    write_zarr(tmp_path / "bad.zarr", volume, chunks=(8, 8, 8))
+    sorted(p for p in (tmp_path / "bad.zarr" / "c").rglob("*") if p.is_file())[2].write_bytes(b"x")
+    assert main(["segment", str(tmp_path / "bad.zarr"), "-o", str(tmp_path / "o2"), "--mask",
+                 "none", "-q"]) == 2
+    err = capsys.readouterr().err
+    assert "unreadable" in err and err.count("\n") == 1
+    assert not [p for p in os.listdir(tmp_path / "o2") if not p.startswith(".")]

@@ -1,0 +1,94 @@
+"""The blockwise pipeline behind `volseg segment` for volumes larger than memory.
+
+`segment_volume` takes Dask arrays too (lazy labels and curvature), but every stage
+that reads the curvature would compute it again. Here each stage reads the one
+before from disk instead: inside the output set's staging folder,
+
+1. the value scale (one pass over the volume: min and max);
+2. the curvature, block by block with its halo, written to ``<stem>_curvature.zarr``
+   (float64, so that the Morse stage reads exactly what it would in memory);
+3. the Morse hierarchy from that store (`descending_complex` on Dask: two passes over
+   its blocks, the cell graph on this process);
+4. the labels, block by block, written to ``<stem>_labels.zarr``;
+5. the summary (region sizes: one pass over the labels) and the preview (three mid
+   slices: read, not computed).
+
+Nothing is ever whole in memory but the per-maximum data and the cell graph. The
+set is committed only when all of it is written (`volseg.io.OutputSet`).
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+__all__ = ["segment_to_zarr"]
+
+
+def segment_to_zarr(volume, outputs, *, operator="weighted", n_regions=None, min_persistence=None,
+                    value_scale=None, boundary="linear", say=lambda message: None) -> dict:
+    """Segment a lazily read `volume` (its data a 3-D Dask array) into an entered
+    `OutputSet` named by ``output_names(stem, blockwise=True)``; returns the summary."""
+    from . import _validate
+    from .curvature import default_value_scale, get_operator, grid_curvature
+    from .io import Frame, read_zarr, write_zarr
+    from .masks import MaskChoice
+    from .morse import descending_complex
+    from .outputs import files_sha256, summary
+    from .preview import write_persistence_plot, write_preview
+    from .segment import Segmentation, _cut, _cut_request
+
+    started = time.perf_counter()
+    entry = get_operator(operator)
+    min_persistence, n_cut, auto = _cut_request(min_persistence, n_regions)
+    data = _validate.lazy_volume_array(volume.data)
+    spacing = volume.spacing
+    frame = volume.frame or Frame.from_spacing(spacing)
+    chunks = "x".join(str(max(c)) for c in data.chunks)
+    result = {}
+
+    def write(paths):
+        from . import _json
+
+        timings = {}
+        start = time.perf_counter()
+        scale = _validate.value_scale(default_value_scale(data, spacing)
+                                      if value_scale is None else value_scale)
+        say(f"{volume.name}: curvature ({entry.name}) of a {'x'.join(map(str, data.shape))} volume "
+            f"in {chunks} blocks")
+        write_zarr(paths["curvature"], grid_curvature(data, entry.name, spacing=spacing,
+                                                      value_scale=scale, boundary=boundary),
+                   frame=frame)
+        curvature = read_zarr(paths["curvature"]).data
+        timings["curvature"] = time.perf_counter() - start
+        start = time.perf_counter()
+        say(f"{volume.name}: Morse complex, block by block")
+        hierarchy = descending_complex(curvature)
+        timings["morse"] = time.perf_counter() - start
+        labels, k, threshold, cut = _cut(hierarchy, min_persistence, n_cut, auto, timings)
+        start = time.perf_counter()
+        write_zarr(paths["labels"], labels.astype(np.min_scalar_type(k)), frame=frame)
+        labels = read_zarr(paths["labels"]).data
+        timings["labels"] = time.perf_counter() - start
+        choice = MaskChoice(None, "none", "none", int(np.prod(data.shape)))
+        seg = Segmentation(labels, curvature, hierarchy, k, entry.name, threshold, scale, spacing,
+                           timings, cut, choice, 0.0)
+        say(f"{volume.name}: {k} regions from {len(hierarchy.maxima)} maxima; writing")
+        info = summary(seg, name=volume.name, source=volume.path,
+                       checksum=files_sha256(volume.files), files=volume.files, frame=frame,
+                       requested_regions=n_regions)
+        info["blockwise"] = {"chunks": chunks, "morse_phases_s": {
+            phase: round(seconds, 4) for phase, seconds in hierarchy.timings.items()}}
+        info["timings_s"]["total"] = round(time.perf_counter() - started, 4)
+        info["outputs"] = {kind: str(path) for kind, path in outputs.targets.items()}
+        curve = (hierarchy.event_persistence, hierarchy.n_components, threshold)
+        title = f"{volume.name}: {k} regions, {entry.name.replace('_', '-')} curvature (blockwise)"
+        write_preview(paths["preview"], data, curvature, labels, title=title, persistence=curve)
+        if "persistence" in paths:
+            write_persistence_plot(paths["persistence"], *curve, k)
+        paths["summary"].write_text(_json.dumps(info, indent=2))
+        result["info"] = info
+
+    outputs.commit(write)
+    return result["info"]
