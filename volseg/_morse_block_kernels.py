@@ -107,3 +107,21 @@ def cross_pairs(halo_values, halo_cells, origin, shape, offsets, out_a, out_b, o
                         out_b[n] = cw
                     n += 1
     return n
+
+
+@numba.njit(cache=True, nogil=True)
+def highest_per_pair(key, order, f, v, keep):
+    """keep[i] = True for the highest (f, v) row of each run of equal key[order]:
+    `order` sorts `key`; one pass."""
+    n = len(order)
+    start = 0
+    while start < n:
+        stop = start + 1
+        best = order[start]
+        while stop < n and key[order[stop]] == key[order[start]]:
+            r = order[stop]
+            if f[r] > f[best] or (f[r] == f[best] and v[r] > v[best]):
+                best = r
+            stop += 1
+        keep[best] = True
+        start = stop

@@ -8,7 +8,8 @@ before from disk instead: inside the output set's staging folder,
 2. the curvature, block by block with its halo, written to ``<stem>_curvature.zarr``
    (float64, so that the Morse stage reads exactly what it would in memory);
 3. the Morse hierarchy from that store (`descending_complex` on Dask: two passes over
-   its blocks, the cell graph on this process);
+   its blocks, the cells written once to the staging folder, the cell graph on this
+   process);
 4. the labels, block by block, written to ``<stem>_labels.zarr``;
 5. the summary (region sizes: one pass over the labels) and the preview (three mid
    slices: read, not computed).
@@ -34,7 +35,6 @@ def segment_to_zarr(volume, outputs, *, operator="weighted", n_regions=None, min
     from .curvature import default_value_scale, get_operator, grid_curvature
     from .io import Frame, read_zarr, write_zarr
     from .masks import MaskChoice
-    from .morse import descending_complex
     from .outputs import files_sha256, summary
     from .preview import write_persistence_plot, write_preview
     from .segment import Segmentation, _cut, _cut_request
@@ -50,7 +50,9 @@ def segment_to_zarr(volume, outputs, *, operator="weighted", n_regions=None, min
 
     def write(paths):
         from . import _json
+        from ._morse_blocks import dask_descending_complex
 
+        staging = paths["summary"].parent.parent      # OutputSet's staging folder
         timings = {}
         start = time.perf_counter()
         scale = _validate.value_scale(default_value_scale(data, spacing)
@@ -64,7 +66,7 @@ def segment_to_zarr(volume, outputs, *, operator="weighted", n_regions=None, min
         timings["curvature"] = time.perf_counter() - start
         start = time.perf_counter()
         say(f"{volume.name}: Morse complex, block by block")
-        hierarchy = descending_complex(curvature)
+        hierarchy = dask_descending_complex(curvature, cells_store=staging / "cells.zarr")
         timings["morse"] = time.perf_counter() - start
         labels, k, threshold, cut = _cut(hierarchy, min_persistence, n_cut, auto, timings)
         start = time.perf_counter()

@@ -1,0 +1,143 @@
+"""Blockwise vs in-memory `volseg segment`, end to end, side by side (issue 14).
+
+    python benchmarks/bench_blockwise.py --sizes 256 512 [--chunks 128] [--workers 1 2]
+                                         [--skip-in-memory-above 512] [--folder /tmp/bw]
+
+For each size N it writes a synthetic smooth uint8 field of N^3 voxels straight to a
+Zarr store, block by block (the field is a sum of sinusoids of the global
+coordinates, so no full array is ever built), then runs, each in its own process:
+
+- ``volseg segment field.npy --mask none`` (in memory; the .npy is written block by
+  block through a memory map) when N <= --skip-in-memory-above;
+- ``volseg segment field.zarr`` (blockwise), once per --workers value (Dask's
+  threaded scheduler with that many workers, ``DASK_NUM_WORKERS``).
+
+It prints wall time, the peak memory of the whole process tree (RSS summed over the
+process and its children, sampled every 0.1 s with psutil), the region count, and
+whether the blockwise labels equal the in-memory ones.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+
+def smooth_block(block_info, n):
+    """The synthetic field on one block, from global coordinates."""
+    (x0, x1), (y0, y1), (z0, z1) = block_info[None]["array-location"]
+    x, y, z = np.meshgrid(np.arange(x0, x1), np.arange(y0, y1), np.arange(z0, z1), indexing="ij",
+                          sparse=True)
+    k = 2 * np.pi / n
+    f = (np.sin(3.1 * k * x + 0.3) * np.cos(2.3 * k * y) + np.sin(4.7 * k * z + 1.1 * k * x)
+         + 0.6 * np.sin(7.3 * k * (x + y) + 2.0) * np.cos(5.9 * k * z) + 0.4 * np.cos(11.0 * k * (y - z)))
+    return np.round(127.5 + 127.5 * f / 3.0).clip(0, 255).astype(np.uint8)
+
+
+def write_inputs(folder: Path, n: int, chunks: int, npy: bool):
+    import dask.array as da
+
+    from volseg.io import write_zarr
+
+    lazy = da.map_blocks(lambda block_info=None: smooth_block(block_info, n), dtype=np.uint8,
+                         chunks=((chunks,) * (n // chunks) + ((n % chunks,) if n % chunks else ()),) * 3)
+    zarr_path = folder / f"field{n}.zarr"
+    if not zarr_path.exists():
+        write_zarr(zarr_path, lazy)
+    npy_path = folder / f"field{n}.npy"
+    if npy and not npy_path.exists():
+        out = np.lib.format.open_memmap(npy_path, mode="w+", dtype=np.uint8, shape=(n, n, n))
+        da.store(lazy, out, lock=False)
+        out.flush()
+        del out
+    return zarr_path, npy_path
+
+
+def run(argv, env=None) -> dict:
+    """Wall time and peak RSS of the process tree of `argv`."""
+    import psutil
+
+    start = time.perf_counter()
+    process = psutil.Popen(argv, env={**os.environ, **(env or {})}, stdout=subprocess.PIPE,
+                           stderr=subprocess.PIPE, text=True)
+    peak = 0
+    while process.poll() is None:
+        try:
+            tree = [process, *process.children(recursive=True)]
+            peak = max(peak, sum(p.memory_info().rss for p in tree if p.is_running()))
+        except psutil.Error:
+            pass
+        time.sleep(0.1)
+    out, err = process.communicate()
+    if process.returncode:
+        raise RuntimeError(f"{' '.join(argv)} failed: {err.strip()[-500:]}")
+    return {"seconds": time.perf_counter() - start, "peak_gb": peak / 2**30, "stdout": out}
+
+
+def labels_of(folder: Path, stem: str):
+    import nibabel
+    import zarr
+
+    zarr_path = folder / f"{stem}_labels.zarr"
+    if zarr_path.exists():
+        return zarr.open(str(zarr_path), mode="r")
+    return nibabel.load(folder / f"{stem}_labels.nii.gz").dataobj
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--sizes", type=int, nargs="+", default=[256, 512])
+    parser.add_argument("--chunks", type=int, default=128)
+    parser.add_argument("--workers", type=int, nargs="+", default=[2])
+    parser.add_argument("--skip-in-memory-above", type=int, default=512)
+    parser.add_argument("--folder", default="/tmp/volseg-bench-blockwise")
+    args = parser.parse_args(argv)
+    folder = Path(args.folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    rows = []
+    for n in args.sizes:
+        in_memory = n <= args.skip_in_memory_above
+        start = time.perf_counter()
+        zarr_path, npy_path = write_inputs(folder, n, args.chunks, in_memory)
+        print(f"{n}^3: inputs ready in {time.perf_counter() - start:.1f} s", flush=True)
+        volseg = [sys.executable, "-m", "volseg", "segment", "--regions", "30", "-q", "--force",
+                  "--json"]
+        reference = None
+        if in_memory:
+            out = folder / f"mem{n}"
+            result = run([*volseg, str(npy_path), "--mask", "none", "-o", str(out)])
+            regions = json.loads(result["stdout"])["n_regions"]
+            rows.append({"size": n, "path": "in memory", "workers": "-", **result, "regions": regions})
+            print(f"{n}^3 in memory: {result['seconds']:.1f} s, peak {result['peak_gb']:.2f} GB",
+                  flush=True)
+            reference = np.asarray(labels_of(out, f"field{n}")[...])
+        for workers in args.workers:
+            out = folder / f"blk{n}_{workers}"
+            result = run([*volseg, str(zarr_path), "-o", str(out)],
+                         env={"DASK_NUM_WORKERS": str(workers)})
+            summary = json.loads(result["stdout"])
+            same = None
+            if reference is not None:
+                same = bool(np.array_equal(np.asarray(labels_of(out, f"field{n}")[...]), reference))
+            rows.append({"size": n, "path": f"blockwise {args.chunks}^3", "workers": workers,
+                         **result, "regions": summary["n_regions"], "same_labels": same,
+                         "phases": summary.get("blockwise", {}).get("morse_phases_s")})
+            print(f"{n}^3 blockwise, {workers} workers: {result['seconds']:.1f} s, peak "
+                  f"{result['peak_gb']:.2f} GB, same labels as in memory: {same}", flush=True)
+    print("\n| size | path | workers | wall s | peak GB (all processes) | regions | same labels |")
+    print("| --- | --- | --- | --- | --- | --- | --- |")
+    for r in rows:
+        print(f"| {r['size']}^3 | {r['path']} | {r['workers']} | {r['seconds']:.1f} | "
+              f"{r['peak_gb']:.2f} | {r['regions']} | {r.get('same_labels', '')} |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
