@@ -125,3 +125,26 @@ def highest_per_pair(key, order, f, v, keep):
             stop += 1
         keep[best] = True
         start = stop
+
+
+@numba.njit(cache=True, nogil=True)
+def spanning_edges(edge_a, edge_b, order, n_cells, keep):
+    """keep[e] = True for the edges of the maximum spanning forest: Kruskal from the
+    last of `order` (the highest saddle) down, over cells 0..n_cells-1. An edge left
+    out joins two cells already joined by higher edges of the same block, so it joins
+    nothing in the whole graph either: the forest of the union of the blocks' forests
+    is the whole graph's (the order is strict, so that forest is unique)."""
+    parent = np.arange(n_cells)
+    for k in range(len(order) - 1, -1, -1):
+        e = order[k]
+        a = edge_a[e]
+        while parent[a] != a:
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        b = edge_b[e]
+        while parent[b] != b:
+            parent[b] = parent[parent[b]]
+            b = parent[b]
+        if a != b:
+            parent[max(a, b)] = min(a, b)
+            keep[e] = True

@@ -61,15 +61,21 @@ def spacing(value, default=(1.0, 1.0, 1.0)) -> tuple:
     return tuple(float(s) for s in array)
 
 
+def number(value, name: str, *, positive: bool = False) -> float:
+    """A finite (and, with `positive`, > 0) number; the message names the argument."""
+    kind = "a positive number" if positive else "a finite number"
+    try:
+        result = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"`{name}` must be {kind}, got {value!r}") from None
+    if not np.isfinite(result) or (positive and result <= 0):
+        raise ValueError(f"`{name}` must be {kind}, got {value!r}")
+    return result
+
+
 def value_scale(value) -> float:
     """The scale s of the value axis: a positive finite number."""
-    try:
-        scale = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"`value_scale` must be a positive number, got {value!r}") from None
-    if not (np.isfinite(scale) and scale > 0):
-        raise ValueError(f"`value_scale` must be a positive number, got {value!r}")
-    return scale
+    return number(value, "value_scale", positive=True)
 
 
 def smooth(value) -> float:

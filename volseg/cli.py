@@ -83,7 +83,7 @@ def _get_parser() -> argparse.ArgumentParser:
         "descending Morse complex; writes the mesh (.npz), a ParaView time series (.pvd + "
         ".vtu per step), a summary and a preview of three time steps.")
     iso.add_argument("inputs", nargs="+", metavar="INPUT",
-                     help="one 4-D .npy / .nii(.gz) (x, y, z, t), or 3-D volumes in time "
+                     help="one 4-D .npy / .nii(.gz) / .zarr (x, y, z, t), or 3-D volumes in time "
                      "order (a quoted glob is sorted by name)")
     iso.add_argument("--level", type=float, required=True, metavar="L", help="isosurface value")
     iso.add_argument("--time-scale", type=float, default=1.0, metavar="S",
@@ -292,13 +292,17 @@ def _segment_all(volumes, out_dir, args, say, **options):
     return summaries
 
 
-def _cmd_segment(args):
-    say = _progress(args.quiet)
-    out_dir = Path(args.out_dir)
+def _check_cut_options(args):
     if isinstance(args.regions, int) and args.regions < 1:
         raise UsageError(f"--regions must be at least 1, got {args.regions}")
     if args.min_persistence is not None and not args.min_persistence >= 0:
         raise UsageError(f"--min-persistence must be a non-negative number, got {args.min_persistence}")
+
+
+def _cmd_segment(args):
+    say = _progress(args.quiet)
+    out_dir = Path(args.out_dir)
+    _check_cut_options(args)
     # Read and check every input before writing or computing anything.
     volumes = [_load(name, args.shape, args.dtype, args.allow_external_data)
                for name in args.inputs]
@@ -367,10 +371,7 @@ def _cmd_isosurface(args):
 
     say = _progress(args.quiet)
     out_dir = Path(args.out_dir)
-    if isinstance(args.regions, int) and args.regions < 1:
-        raise UsageError(f"--regions must be at least 1, got {args.regions}")
-    if args.min_persistence is not None and not args.min_persistence >= 0:
-        raise UsageError(f"--min-persistence must be a non-negative number, got {args.min_persistence}")
+    _check_cut_options(args)
     if not (np.isfinite(args.level)):
         raise UsageError(f"--level must be a finite number, got {args.level}")
     if not (np.isfinite(args.time_scale) and args.time_scale > 0):

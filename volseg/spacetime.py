@@ -163,12 +163,7 @@ def segment_series(
 
     data = _validate.volume_array(field, "field", ndim=4)
     spacing = _validate.spacing(spacing)
-    try:
-        time_scale = float(time_scale)
-    except (TypeError, ValueError):
-        raise ValueError(f"`time_scale` must be a positive number, got {time_scale!r}") from None
-    if not (np.isfinite(time_scale) and time_scale > 0):
-        raise ValueError(f"`time_scale` must be a positive number, got {time_scale!r}")
+    time_scale = _validate.number(time_scale, "time_scale", positive=True)
     relax = int(relax)
     if relax < 0:
         raise ValueError(f"`relax` must be a number of rounds >= 0, got {relax}")

@@ -59,7 +59,6 @@ def dask_grid_curvature(array, entry, spacing, value_scale, boundary):
     """`checked_grid_curvature` for a 3-D Dask array (checked: real, 3-D, >= 2 per
     axis; finiteness is checked per block). Returns a lazy float64 Dask array with the
     input's chunks."""
-
     scaled = array.astype(np.float64) * value_scale
     padded = scaled
     for axis in range(3):

@@ -67,13 +67,38 @@ def _expand(inputs) -> list[Path]:
     return paths
 
 
+def _zarr_series(path: Path) -> Series:
+    """A 4-D Zarr array (x, y, z, t), read whole (the isosurface needs all of it)."""
+    import zarr
+
+    try:
+        array = zarr.open(str(path), mode="r")
+    except Exception as err:  # noqa: BLE001 - any failure to open is the store's
+        raise VolumeFileError(f"{path}: not a readable Zarr store ({type(err).__name__}: {err})") from None
+    if not hasattr(array, "nchunks") or array.ndim != 4:
+        raise VolumeFileError(f"{path}: the series must be one 4-D Zarr array (x, y, z, t), got "
+                              f"{'a group' if not hasattr(array, 'ndim') else f'{array.ndim}-D'}")
+    if array.nchunks_initialized < array.nchunks:
+        raise VolumeFileError(f"{path}: {array.nchunks - array.nchunks_initialized} of "
+                              f"{array.nchunks} chunks are missing")
+    try:
+        data = array[...]
+    except Exception as err:  # noqa: BLE001 - codec errors have no common type
+        raise VolumeFileError(f"{path}: a chunk is unreadable ({type(err).__name__}: {err})") from None
+    data = _validate.volume_array(data, source=path, error=VolumeFileError, ndim=4)
+    spacing = tuple(dict(array.attrs).get("volseg", {}).get("spacing", (1.0, 1.0, 1.0)))[:3]
+    name = path.name[:-5] if path.name.endswith(".zarr") else path.name
+    return Series(data, spacing, name, (path,), Frame.from_spacing(spacing))
+
+
 def read_series(inputs, *, allow_external_data: bool = False) -> Series:
     """Read a time series.
 
     Parameters
     ----------
     inputs : path, or sequence of paths or glob patterns
-        One ``.npy`` / ``.nii`` / ``.nii.gz`` file holding an (x, y, z, t) array, or
+        One ``.npy`` / ``.nii`` / ``.nii.gz`` file or Zarr array holding an (x, y, z, t)
+        array, or
         two or more 3-D volumes (any format `read_volume` reads) in time order; a
         glob pattern expands to its matches sorted by name.
 
@@ -94,6 +119,10 @@ def read_series(inputs, *, allow_external_data: bool = False) -> Series:
     paths = _expand(inputs)
     if len(paths) == 1:
         path = paths[0]
+        from .zarr_store import is_zarr
+
+        if is_zarr(path):
+            return _zarr_series(path)
         regular_file_size(path)
         lower = path.name.lower()
         if not lower.endswith(SERIES_SUFFIXES):

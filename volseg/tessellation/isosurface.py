@@ -28,7 +28,6 @@ DESIGN.md sections 2 and 11).
 from __future__ import annotations
 
 import itertools
-import math
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -161,13 +160,9 @@ def _check_values(field) -> NDArray[np.float64]:
 
 
 def _check_level(level) -> float:
-    try:
-        level = float(level)
-    except (TypeError, ValueError):
-        raise ValueError(f"`level` must be a number, got {level!r}") from None
-    if not math.isfinite(level):
-        raise ValueError(f"`level` must be finite, got {level}")
-    return level
+    from .._validate import number
+
+    return number(level, "level")
 
 
 def _axis_vector(value, d: int, name: str, default: float, positive: bool) -> NDArray:
