@@ -109,6 +109,12 @@ def test_read_series_from_one_4d_file_and_from_3d_steps(tmp_path):
     assert series.shape == field.shape and series.spacing == (0.5, 0.5, 0.5)
     for t in range(3):
         np.save(tmp_path / f"step_{t}.npy", field[..., t])
+    import zarr
+
+    store = zarr.create_array(str(tmp_path / "blob.zarr"), shape=field.shape, chunks=(3, 3, 3, 3),
+                              dtype="float32")
+    store[:] = field
+    assert np.array_equal(read_series(tmp_path / "blob.zarr").data, field)
     series = read_series(str(tmp_path / "step_*.npy"))
     assert np.array_equal(series.data, field) and len(series.files) == 3
     np.save(tmp_path / "step_9.npy", field[:5, ..., 0])
