@@ -154,10 +154,11 @@ def _per_block(function, *arrays, **kwargs):
                          chunks=tuple((1,) * len(c) for c in arrays[0].chunks), meta=np.empty((0,) * 3, object))
 
 
-def dask_descending_complex(field, connectivity="kuhn", cells_store=None):
+def dask_descending_complex(field, connectivity="kuhn", persist=None):
     """`descending_complex` of a 3-D Dask array (see the module docstring). With
-    `cells_store` (a path), the cells are written there as Zarr once and read back,
-    instead of recomputed by every later pass (edges, labels)."""
+    `persist` (a function taking the lazy cells and returning them stored, e.g.
+    written to Zarr and read back), the cells are computed once instead of by every
+    later pass (edges, labels)."""
     import dask.array as da
 
     from . import _morse_kernels
@@ -200,12 +201,9 @@ def dask_descending_complex(field, connectivity="kuhn", cells_store=None):
                                maxima_sorted, maxima_ids)
 
     cells = halo.map_blocks(cells_of, dtype=index_type, chunks=values.chunks)
-    if cells_store is not None:
-        from .io import read_zarr, write_zarr
-
-        write_zarr(cells_store, cells)
-        cells = read_zarr(cells_store).data
-        phases.done("blocks: cells (written)")
+    if persist is not None:
+        cells = persist(cells)
+        phases.done("blocks: cells (stored)")
     halo_cells = da.overlap.overlap(cells.astype(np.int64), depth=1, boundary=-1)
     pairs = _per_block(lambda h, c, block_id: _pairs_of_block(h, c, origin(block_id), shape,
                                                               offsets), halo, halo_cells).compute()

@@ -66,7 +66,11 @@ def segment_to_zarr(volume, outputs, *, operator="weighted", n_regions=None, min
         timings["curvature"] = time.perf_counter() - start
         start = time.perf_counter()
         say(f"{volume.name}: Morse complex, block by block")
-        hierarchy = dask_descending_complex(curvature, cells_store=staging / "cells.zarr")
+        def stored(cells):     # computed once, read back by the edge and label passes
+            write_zarr(staging / "cells.zarr", cells)
+            return read_zarr(staging / "cells.zarr").data
+
+        hierarchy = dask_descending_complex(curvature, persist=stored)
         timings["morse"] = time.perf_counter() - start
         labels, k, threshold, cut = _cut(hierarchy, min_persistence, n_cut, auto, timings)
         start = time.perf_counter()

@@ -26,8 +26,11 @@ __all__ = ["read_zarr", "write_zarr", "is_zarr"]
 def is_zarr(path) -> bool:
     """A folder holding Zarr metadata (``zarr.json``, ``.zarray`` or ``.zgroup``)."""
     path = Path(path)
-    return path.is_dir() and any((path / name).is_file()
-                                 for name in ("zarr.json", ".zarray", ".zgroup", ".zattrs"))
+    try:
+        return path.is_dir() and any((path / name).is_file()
+                                     for name in ("zarr.json", ".zarray", ".zgroup", ".zattrs"))
+    except OSError:   # a name too long, a loop: not a store; the file readers say why
+        return False
 
 
 def _ome_level0(group, path):
