@@ -12,13 +12,13 @@ from volseg import descending_complex, grid_curvature
 
 from .conftest import smooth_random_field
 
-CHUNKINGS = [(37, 64, 50), (2, 70, 45), (23, 17, 11)]
+CHUNKINGS = [(27, 40, 50), (2, 46, 33), (23, 17, 11)]
 
 
 @pytest.fixture(scope="module")
 def volume():
     rng = np.random.default_rng(7)
-    field = smooth_random_field((61, 70, 45), rng, sigma=2.0)
+    field = smooth_random_field((41, 46, 33), rng, sigma=2.0)
     field[10:20, 10:20, 10:20] = 0.3          # a plateau
     return field
 
