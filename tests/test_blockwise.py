@@ -111,10 +111,11 @@ def test_blockwise_morse_refuses_what_it_cannot_do(volume):
         descending_complex(lazy, mask=np.ones(volume.shape, bool))
     with pytest.raises(ValueError, match="3-D"):
         descending_complex(da.zeros((5, 5), chunks=2))
-    bad = volume.copy()
-    bad[3, 3, 3] = np.inf
-    with pytest.raises(ValueError, match="NaN or infinite"):
-        descending_complex(da.from_array(bad, chunks=20))
+    for value in (np.inf, -np.inf, np.nan):
+        bad = volume.copy()
+        bad[3, 3, 3] = value
+        with pytest.raises(ValueError, match="NaN or infinite"):
+            descending_complex(da.from_array(bad, chunks=20))
 
 
 def test_segment_volume_of_a_dask_array_equals_in_memory(small):
