@@ -137,8 +137,9 @@ def write_zarr(path, data, *, frame: Frame | None = None, chunks=None) -> Path:
     import zarr
 
     lazy = data if isinstance(data, da.Array) else da.from_array(np.asarray(data), chunks=chunks or "auto")
-    if chunks is not None:
-        lazy = lazy.rechunk(chunks)
+    # Regular chunks, equal to the store's: each block then writes whole store chunks
+    # of its own (no two blocks share one, so no lock is needed).
+    lazy = lazy.rechunk(chunks if chunks is not None else tuple(c[0] for c in lazy.chunks))
     frame = frame or Frame.from_spacing((1.0, 1.0, 1.0))
     store = zarr.create_array(str(path), shape=lazy.shape, chunks=tuple(c[0] for c in lazy.chunks),
                               dtype=lazy.dtype, fill_value=0, overwrite=True,
