@@ -66,6 +66,7 @@ def segment_to_zarr(volume, outputs, *, operator="weighted", n_regions=None, min
         timings["curvature"] = time.perf_counter() - start
         start = time.perf_counter()
         say(f"{volume.name}: Morse complex, block by block")
+
         def stored(cells):     # computed once, read back by the edge and label passes
             write_zarr(staging / "cells.zarr", cells)
             return read_zarr(staging / "cells.zarr").data
