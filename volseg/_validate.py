@@ -12,6 +12,22 @@ __all__ = ["volume_array", "spacing", "value_scale", "smooth"]
 # which owns them: the Morse stage stands alone.
 
 
+def is_lazy(array) -> bool:
+    """Whether `array` is a Dask array (a lazily computed, blockwise volume), without
+    importing Dask for other inputs."""
+    return type(array).__module__.startswith("dask.")
+
+
+def _check_layout(data, what: str, error, ndim: int) -> None:
+    """The checks that need no values: `ndim` axes, >= 2 samples each, a real type."""
+    if data.ndim != ndim:
+        raise error(f"{what} must be {ndim}-D, got shape {data.shape}")
+    if min(data.shape) < 2:
+        raise error(f"{what} needs at least 2 samples along each axis, got shape {data.shape}")
+    if np.dtype(data.dtype).kind not in "biuf":
+        raise error(f"{what} must hold real numbers, got dtype {data.dtype}")
+
+
 def volume_array(volume, name: str = "volume", *, source=None,
                  error: type[ValueError] = ValueError, ndim: int = 3) -> NDArray:
     """A 3-D (or `ndim`-D) real, finite array with at least 2 samples per axis (not copied).
@@ -21,12 +37,7 @@ def volume_array(volume, name: str = "volume", *, source=None,
     """
     data = np.asarray(volume)
     what = f"{source}: the {'volume' if ndim == 3 else 'series'}" if source is not None else f"`{name}`"
-    if data.ndim != ndim:
-        raise error(f"{what} must be {ndim}-D, got shape {data.shape}")
-    if min(data.shape) < 2:
-        raise error(f"{what} needs at least 2 samples along each axis, got shape {data.shape}")
-    if data.dtype.kind not in "biuf":
-        raise error(f"{what} must hold real numbers, got dtype {data.dtype}")
+    _check_layout(data, what, error, ndim)
     if data.dtype.kind == "f":
         bad = ~np.isfinite(data)
         if bad.any():
@@ -40,12 +51,7 @@ def volume_array(volume, name: str = "volume", *, source=None,
 def lazy_volume_array(array, name: str = "volume"):
     """`volume_array`'s checks that need no data (3-D, >= 2 per axis, real) for a lazy
     (Dask) array; finiteness is checked block by block when it is computed."""
-    if array.ndim != 3:
-        raise ValueError(f"`{name}` must be 3-D, got shape {array.shape}")
-    if min(array.shape) < 2:
-        raise ValueError(f"`{name}` needs at least 2 samples along each axis, got shape {array.shape}")
-    if np.dtype(array.dtype).kind not in "biuf":
-        raise ValueError(f"`{name}` must hold real numbers, got dtype {array.dtype}")
+    _check_layout(array, f"`{name}`", ValueError, 3)
     return array
 
 

@@ -192,7 +192,9 @@ def _output_sets(volumes, out_dir, *, force, wait, persistence_plot=False):
 
 
 def _is_lazy(volume) -> bool:
-    return type(volume.data).__module__.startswith("dask.")
+    from ._validate import is_lazy
+
+    return is_lazy(volume.data)
 
 
 def _blockwise_mask(data, mask):

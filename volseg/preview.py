@@ -201,7 +201,9 @@ def write_preview(path, volume, curvature, labels, *, title="", persistence=None
         indices.append(tuple(index))
     # Only the three mid slices are read: a lazy (Dask, Zarr) volume is never loaded whole.
     sliced = [[np.asarray(a[index]) for index in indices] for a in (volume, curvature, labels)]
-    if type(volume).__module__.startswith("dask."):
+    from ._validate import is_lazy
+
+    if is_lazy(volume):
         import dask
 
         lo, hi, k = (float(v) for v in dask.compute(volume.min(), volume.max(), labels.max()))

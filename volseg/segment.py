@@ -84,7 +84,7 @@ class Segmentation:
         """One entry per region: ``label`` (1..k), ``size`` (voxels or vertices),
         ``maximum`` (its highest curvature maximum: [x, y, z] voxel, or the vertex
         index with its ``position`` on a mesh) and ``curvature_at_maximum``."""
-        if type(self.labels).__module__.startswith("dask."):   # one pass over the blocks
+        if _validate.is_lazy(self.labels):   # one pass over the blocks
             import dask.array as da
 
             sizes = da.bincount(self.labels.ravel(), minlength=self.n_regions + 1).compute()
@@ -156,7 +156,7 @@ def segment_volume(
 
     entry = get_operator(operator)
     min_persistence, n_regions, auto = _cut_request(min_persistence, n_regions)
-    if type(getattr(volume, "data", volume)).__module__.startswith("dask."):
+    if _validate.is_lazy(getattr(volume, "data", volume)):
         return _segment_dask(volume, entry, min_persistence, n_regions, auto, value_scale,
                              spacing, boundary, mask, smooth)
     spacing = _validate.spacing(spacing, getattr(volume, "spacing", (1.0, 1.0, 1.0)))

@@ -72,9 +72,7 @@ def default_value_scale(volume: ArrayLike, spacing=(1.0, 1.0, 1.0)) -> float:
     the non-linear regime where it differs from a plain Laplacian (tiny s makes
     H -> -Laplacian(f) s / 3). A constant volume gets s = 1.
     """
-    from ._grid_blocks import is_dask
-
-    if is_dask(volume):   # one pass over the blocks for both statistics
+    if _validate.is_lazy(volume):   # one pass over the blocks for both statistics
         import dask
 
         lo, hi = (float(v) for v in dask.compute(volume.min(), volume.max()))
@@ -137,17 +135,17 @@ def grid_curvature(
     entry = get_operator(operator)
     check_boundary(boundary)
     h = _validate.spacing(spacing, getattr(volume, "spacing", (1.0, 1.0, 1.0)))
-    from ._grid_blocks import dask_grid_curvature, is_dask
-
-    if is_dask(getattr(volume, "data", volume)):
-        data = _validate.lazy_volume_array(getattr(volume, "data", volume))
-        if value_scale is None:
-            value_scale = default_value_scale(data, h)
-        return dask_grid_curvature(data, entry, h, _validate.value_scale(value_scale), boundary)
-    data = _validate.volume_array(volume)
+    lazy = _validate.is_lazy(getattr(volume, "data", volume))
+    data = (_validate.lazy_volume_array(getattr(volume, "data", volume)) if lazy
+            else _validate.volume_array(volume))
     if value_scale is None:
         value_scale = default_value_scale(data, h)
-    return checked_grid_curvature(data, entry, h, _validate.value_scale(value_scale), boundary)
+    scale = _validate.value_scale(value_scale)
+    if lazy:
+        from ._grid_blocks import dask_grid_curvature
+
+        return dask_grid_curvature(data, entry, h, scale, boundary)
+    return checked_grid_curvature(data, entry, h, scale, boundary)
 
 
 def check_boundary(boundary: str) -> str:

@@ -17,12 +17,7 @@ import numpy as np
 from ._grid import _kernel_tables
 from ._grid_kernels import grid_kernel
 
-__all__ = ["dask_grid_curvature", "is_dask"]
-
-
-def is_dask(array) -> bool:
-    """Whether `array` is a Dask array (without importing Dask for other inputs)."""
-    return type(array).__module__.startswith("dask.")
+__all__ = ["dask_grid_curvature"]
 
 
 def _pad_axis(array, axis: int, boundary: str):
