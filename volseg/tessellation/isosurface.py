@@ -138,13 +138,16 @@ def _cut(simplices: NDArray, values: NDArray, level: float, coordinates) -> tupl
     return np.concatenate(below_out), np.concatenate(above_out)
 
 
-def _weld(below: NDArray, above: NDArray, n_points: int) -> tuple:
-    """Shared crossing points: one vertex per grid edge. Returns (edges (V, 2),
-    simplices (S, k-1))."""
+def _weld(below: NDArray, above: NDArray, values: NDArray, level: float) -> tuple:
+    """Shared crossing points: one vertex per edge. Returns (edges (V, 2), simplices
+    (S, k-1), fraction (V,): where the level crosses each edge, from its below end)."""
+    n_points = len(values)
     keys = below.astype(np.int64) * n_points + above
     unique, inverse = np.unique(keys.ravel(), return_inverse=True)
     edges = np.column_stack([unique // n_points, unique % n_points])
-    return edges, inverse.reshape(keys.shape).astype(np.intp)
+    f_below, f_above = values[edges[:, 0]], values[edges[:, 1]]
+    fraction = (level - f_below) / (f_above - f_below)
+    return edges, inverse.reshape(keys.shape).astype(np.intp), fraction
 
 
 def _check_values(field) -> NDArray[np.float64]:
@@ -286,9 +289,10 @@ def isosurface(field: ArrayLike, level: float, *, spacing=None, origin=None,
         1e-6 merges the crossings on a grid point whose sample equals the level
         (common in integer data) or misses it by rounding: left apart they give
         zero-volume simplices, on which curvature is undefined. Larger values (0.1 -
-        0.2) also remove the slivers of near-vertex crossings. A merge
-        that would break the manifold (a critical point of the interpolant at the
-        level) is not made; that grid point keeps its separate crossings.
+        0.2) also remove the slivers of near-vertex crossings. Where a merge would
+        break the manifold or leave a flat simplex (a critical point of the
+        interpolant at the level), that sample is instead moved off the level by a
+        tenth of its smallest gap across it, so its crossings stay apart.
 
     Returns
     -------
@@ -354,9 +358,8 @@ def isosurface(field: ArrayLike, level: float, *, spacing=None, origin=None,
         above.append(upper)
     if not below:
         below, above = [np.zeros((0, d), dtype=np.int64)], [np.zeros((0, d), dtype=np.int64)]
-    edges, simplices = _weld(np.concatenate(below), np.concatenate(above), array.size)
-    f_below, f_above = values[edges[:, 0]], values[edges[:, 1]]
-    fraction = (level - f_below) / (f_above - f_below)
+    edges, simplices, fraction = _weld(np.concatenate(below), np.concatenate(above), values,
+                                       level)
 
     def positions(edges, fraction):
         start, end = coordinates(edges[:, 0]), coordinates(edges[:, 1])
@@ -403,9 +406,7 @@ def level_set(vertices: ArrayLike, simplices: ArrayLike, field: ArrayLike, level
                          f"({vertices.shape[1] + 1} vertices each), got {k}")
     ordered = np.sort(simplices, axis=1)
     lower, upper = _cut(ordered, values, level, (lambda ids: vertices[ids]) if oriented else None)
-    edges, out = _weld(lower, upper, len(vertices))
-    f_below, f_above = values[edges[:, 0]], values[edges[:, 1]]
-    fraction = (level - f_below) / (f_above - f_below)
+    edges, out, fraction = _weld(lower, upper, values, level)
     points = vertices[edges[:, 0]] + fraction[:, None] * (vertices[edges[:, 1]] - vertices[edges[:, 0]])
     faces = boundary_faces(out) if len(out) and k > 2 else np.zeros((0, max(k - 2, 0)), dtype=np.intp)
     return Isosurface(points, out, faces, edges, fraction)
