@@ -610,7 +610,12 @@ class MorseHierarchy:
             Consecutive labels 0..k-1, ordered by decreasing maximum value; with a
             mask, 0 outside it and regions 1..k.
         """
-        region = self.region_of_maximum(min_persistence, n_regions)
+        return self.relabel(self.region_of_maximum(min_persistence, n_regions))
+
+    def relabel(self, region):
+        """Labels of every vertex from the region of each maximum (the result of
+        `region_of_maximum`): what `segment` returns, for a caller that needs the
+        regions too."""
         if type(self.cells).__module__.startswith("dask."):   # blockwise: relabel per block
             return self.cells.map_blocks(lambda cells: region[cells], dtype=region.dtype)
         if self.mask is None:

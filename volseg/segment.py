@@ -227,11 +227,12 @@ def _cut(hierarchy: MorseHierarchy, min_persistence, n_regions, auto, timings) -
     start = time.perf_counter()
     if auto:
         n_regions = hierarchy.largest_gap(AUTO_REGION_RANGE)
-    labels = hierarchy.segment(min_persistence=min_persistence, n_regions=n_regions)
+    region = hierarchy.region_of_maximum(min_persistence, n_regions)
+    labels = hierarchy.relabel(region)
     if hierarchy.mask is None:
         labels += 1  # regions 1..k; 0 is kept for voxels outside a mask
     timings["cut"] = time.perf_counter() - start
-    k = int(hierarchy.region_of_maximum(min_persistence, n_regions).max()) + 1
+    k = int(region.max()) + 1
     threshold = float(min_persistence) if min_persistence is not None else hierarchy.threshold_for(k)
     return labels, k, threshold, {"min_persistence": min_persistence, "n_regions": n_regions,
                                   "auto": auto}
