@@ -79,48 +79,35 @@ def value_and_gradient(coefficients, strides, upper, index, inverse_spacing, val
     for p in numba.prange(n_points):
         weight = np.empty((d, 4))
         slope = np.empty((d, 4))
+        digit = np.empty(d, dtype=np.int64)
         base = 0
         for a in range(d):
             u = min(max(index[p, a], 0.0), upper[a]) + PAD
-            cell = np.floor(u)
-            t = u - cell
-            s = 1.0 - t
-            weight[a, 0] = s * s * s / 6.0
-            weight[a, 1] = (3.0 * t * t * t - 6.0 * t * t + 4.0) / 6.0
-            weight[a, 2] = (-3.0 * t * t * t + 3.0 * t * t + 3.0 * t + 1.0) / 6.0
-            weight[a, 3] = t * t * t / 6.0
-            slope[a, 0] = -0.5 * s * s
-            slope[a, 1] = 0.5 * (3.0 * t * t - 4.0 * t)
-            slope[a, 2] = 0.5 * (-3.0 * t * t + 2.0 * t + 1.0)
-            slope[a, 3] = 0.5 * t * t
-            base += (np.int64(cell) - 1) * strides[a]
+            first, w, sl = _weights(u)
+            for j in range(4):
+                weight[a, j] = w[j]
+                slope[a, j] = sl[j]
+            base += first * strides[a]
         total = 0.0
         partial = np.zeros(d)
         for combo in range(combos):
             rest = combo
             offset = base
-            w = 1.0
             for a in range(d - 1, -1, -1):
-                j = rest % 4
+                digit[a] = rest % 4
                 rest //= 4
-                offset += j * strides[a]
-                w *= weight[a, j]
+                offset += digit[a] * strides[a]
             c = coefficients[offset]
+            w = 1.0
+            for a in range(d):
+                w *= weight[a, digit[a]]
             total += c * w
-            rest = combo
-            for a in range(d - 1, -1, -1):
-                j = rest % 4
-                rest //= 4
-                if weight[a, j] != 0.0:
-                    partial[a] += c * w / weight[a, j] * slope[a, j]
-                else:  # w is 0 through this axis: rebuild the product without it
-                    q = 1.0
-                    r2 = combo
-                    for b in range(d - 1, -1, -1):
-                        jb = r2 % 4
-                        r2 //= 4
-                        q *= slope[b, jb] if b == a else weight[b, jb]
-                    partial[a] += c * q
+            for a in range(d):   # the product with axis a's weight replaced by its slope
+                q = c * slope[a, digit[a]]
+                for b in range(d):
+                    if b != a:
+                        q *= weight[b, digit[b]]
+                partial[a] += q
         value[p] = total
         for a in range(d):
             gradient[p, a] = partial[a] * inverse_spacing[a]
