@@ -449,14 +449,17 @@ def edges(simplices: ArrayLike) -> NDArray[np.intp]:
     simplices = np.asarray(simplices)
     k = simplices.shape[1]
     pairs = np.sort(np.concatenate([simplices[:, [i, j]] for i in range(k)
-                                    for j in range(i + 1, k)]), axis=1).astype(np.int64)
-    if not len(pairs):
-        return pairs.astype(np.intp)
-    base = int(pairs.max()) + 1
-    if base < 3_000_000_000:  # one int64 key per pair: sorts as the rows do, 3-5x faster
-        keys = np.unique(pairs[:, 0] * base + pairs[:, 1])
-        return np.column_stack([keys // base, keys % base]).astype(np.intp)
-    return np.unique(pairs, axis=0).astype(np.intp)
+                                    for j in range(i + 1, k)]), axis=1).astype(np.intp)
+    return unique_rows(pairs)
+
+
+def unique_rows(rows: NDArray[np.intp]) -> NDArray[np.intp]:
+    """The distinct rows of an array of small non-negative ints, in lexicographic order
+    (as ``np.unique(rows, axis=0)``, 3-5x faster: one int64 key per row)."""
+    if not len(rows):
+        return rows
+    keys = _row_keys(rows, int(rows.max()) + 1)
+    return rows[np.unique(keys, return_index=True)[1]]
 
 
 def vertex_adjacency(simplices: ArrayLike, n_vertices: int):

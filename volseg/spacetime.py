@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .mesh import unique_rows
 from .segment import Segmentation, segment_mesh
 from .tessellation.isosurface import Isosurface, isosurface
 from .tessellation.mesh_quality import quality, relax_isosurface
@@ -103,7 +104,7 @@ def time_slices(surface: Isosurface, shape) -> list[TimeSlice]:
     faces = np.concatenate([tets[:, list(c)] for c in itertools.combinations(range(4), 3)])
     where = layer[faces]
     faces = faces[(where[:, 0] >= 0) & (where[:, 0] == where[:, 1]) & (where[:, 0] == where[:, 2])]
-    faces = np.unique(np.sort(faces, axis=1), axis=0)
+    faces = unique_rows(np.sort(faces, axis=1))
     face_layer = layer[faces[:, 0]]
     out = []
     for step in range(steps):
