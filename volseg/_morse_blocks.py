@@ -156,15 +156,23 @@ def _per_block(function, *arrays, **kwargs):
                          chunks=tuple((1,) * len(c) for c in arrays[0].chunks), meta=np.empty((0,) * 3, object))
 
 
-def dask_descending_complex(field, connectivity="kuhn", persist=None):
-    """`descending_complex` of a 3-D Dask array (see the module docstring). With
-    `persist` (a function taking the lazy cells and returning them stored, e.g.
-    written to Zarr and read back), the cells are computed once instead of by every
-    later pass (edges, labels)."""
+def dask_descending_complex(field, connectivity="kuhn", persist=None, wrap=None, compute=None):
+    """`descending_complex` of a 3-D Dask array (see the module docstring).
+
+    Options of the blockwise pipeline (`volseg.blockwise`): `persist` (a function
+    taking the lazy cells and returning them stored, e.g. written to Zarr and read
+    back) computes the cells once instead of in every later pass (edges, labels);
+    `wrap(stage, function)` wraps each per-block function (to keep finished blocks on
+    disk); `compute(*collections, stage=name)` replaces `dask.compute` (to show
+    progress)."""
+    import dask
     import dask.array as da
 
     from . import _morse_kernels
     from .morse import MorseHierarchy, _Phases, grid_offsets
+
+    wrap = wrap or (lambda stage, function: function)
+    compute = compute or (lambda *collections, stage: dask.compute(*collections))
 
     if field.ndim != 3:
         raise ValueError(f"a Dask `field` must be 3-D, got shape {field.shape}")
@@ -182,8 +190,8 @@ def dask_descending_complex(field, connectivity="kuhn", persist=None):
     def origin(block_id):
         return np.array([starts[d][block_id[d]] for d in range(3)], dtype=np.int64)
 
-    summaries = _per_block(lambda h, block_id: _summary_of_block(h, origin(block_id), shape,
-                                                                 offsets), halo).compute()
+    summaries, = compute(_per_block(wrap("ascent", lambda h, block_id: _summary_of_block(
+        h, origin(block_id), shape, offsets)), halo), stage="Morse: steepest ascent per block")
     summaries = list(summaries.ravel())
     phases.done("blocks: steepest ascent, path compression")
     maxima = np.concatenate([s[0] for s in summaries])
@@ -198,17 +206,21 @@ def dask_descending_complex(field, connectivity="kuhn", persist=None):
     maxima_sorted, maxima_ids = maxima[by_gid], by_gid.astype(index_type)
     phases.done("client: exits resolved, maxima ordered")
 
-    def cells_of(h, block_id=None):
-        return _cells_of_block(h, origin(block_id), shape, offsets, layer_keys, layer_ends,
-                               maxima_sorted, maxima_ids)
+    def cells_of(h, tables, block_id=None):
+        return _cells_of_block(h, origin(block_id), shape, offsets, *tables)
 
-    cells = halo.map_blocks(cells_of, dtype=index_type, chunks=values.chunks)
+    # The lookup tables as one shared task: a distributed scheduler sends them to each
+    # worker once, not inside every block's task.
+    tables = dask.delayed((layer_keys, layer_ends, maxima_sorted, maxima_ids), pure=True)
+    cells = halo.map_blocks(wrap("cells", cells_of), tables, dtype=index_type,
+                            chunks=values.chunks, meta=np.empty((0, 0, 0), index_type))
     if persist is not None:
         cells = persist(cells)
         phases.done("blocks: cells (stored)")
     halo_cells = da.overlap.overlap(cells.astype(np.int64), depth=1, boundary=-1)
-    pairs = _per_block(lambda h, c, block_id: _pairs_of_block(h, c, origin(block_id), shape,
-                                                              offsets), halo, halo_cells).compute()
+    pairs, = compute(_per_block(wrap("pairs", lambda h, c, block_id: _pairs_of_block(
+        h, c, origin(block_id), shape, offsets)), halo, halo_cells),
+        stage="Morse: cross-cell edges and spanning forest per block")
     pairs = list(pairs.ravel())
     phases.done("blocks: cells and cross-cell edges")
     edge_a, edge_b, edge_v, edge_f = _highest_per_pair(

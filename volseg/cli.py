@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from . import _json
+from .engine import MEMORY_SHARE
 from ._version import __version__
 from .curvature import cli_choices, normalize_operator
 from .segment import AUTO_REGION_RANGE, DEFAULT_REGIONS
@@ -61,6 +62,18 @@ def _get_parser() -> argparse.ArgumentParser:
     seg.add_argument("--chunks", type=int, metavar="N",
                      help="segment block by block in chunks of N^3 voxels (the blockwise path, "
                      "always taken for Zarr input): labels and curvature are written as .zarr")
+    engine = seg.add_argument_group(
+        "blockwise engine", "where the blockwise path (Zarr input, --chunks) runs its blocks")
+    engine.add_argument("--scheduler", metavar="ADDRESS",
+                        help="'threads' (default: Dask's threaded scheduler in this process, "
+                        "the fastest on one machine), 'local' (a local dask.distributed cluster "
+                        "with worker memory limits), or a running scheduler's address "
+                        "(tcp://host:port)")
+    engine.add_argument("--workers", type=int, metavar="N",
+                        help="threads or local workers (default: one per core)")
+    engine.add_argument("--memory-limit", metavar="BYTES",
+                        help="memory budget of the local cluster's workers together, e.g. 12GB "
+                        f"or 0.5 (a share of RAM; default {MEMORY_SHARE:g} of this machine's RAM)")
     seg.add_argument("--shape", type=int, nargs=3, metavar=("X", "Y", "Z"))
     seg.add_argument("--dtype", help="voxel type of raw input (uint8, uint16, float32, ...)")
     seg.add_argument("--value-scale", type=float, metavar="S",
@@ -156,13 +169,42 @@ def _progress(quiet):
     return say
 
 
-def _load(input_name, shape=None, dtype=None, allow_external_data=False):
-    """The Volume of a volume file or a named dataset (`volseg.datasets.resolve`)."""
+def _load(input_name, shape=None, dtype=None, allow_external_data=False, chunks=None):
+    """The Volume of a volume file or a named dataset (`volseg.datasets.resolve`); lazy
+    (a Dask array of `chunks`) when `chunks` is given."""
     from .datasets import resolve
     from .io import read_volume
 
     path = resolve(input_name)
-    return read_volume(path, shape=shape, dtype=dtype, allow_external_data=allow_external_data)
+    return read_volume(path, shape=shape, dtype=dtype, allow_external_data=allow_external_data,
+                       chunks=chunks)
+
+
+def _load_for_budget(input_name, args, budget, say):
+    """`_load`, lazily (the blockwise path, `DEFAULT_CHUNKS`) when --chunks is not given
+    but the in-memory path would need more than `budget` bytes (`IN_MEMORY_BYTES_PER_VOXEL`
+    per voxel). The file size bounds the voxel count from above, so small files are
+    read as before; compressed files are not estimated (their size says too little)."""
+    from .blockwise import DEFAULT_CHUNKS, IN_MEMORY_BYTES_PER_VOXEL
+    from .datasets import resolve
+
+    options = (args.shape, args.dtype, args.allow_external_data)
+    if args.chunks is not None:
+        return _load(input_name, *options, chunks=args.chunks)
+    path = Path(resolve(input_name))
+    try:
+        size = path.stat().st_size if path.is_file() else 0
+    except OSError:
+        size = 0      # read_volume names the problem
+    if size * IN_MEMORY_BYTES_PER_VOXEL > budget and not path.name.lower().endswith(".gz"):
+        volume = _load(input_name, *options, chunks=DEFAULT_CHUNKS)
+        need = int(np.prod(volume.shape)) * IN_MEMORY_BYTES_PER_VOXEL
+        if need > budget:
+            say(f"{volume.name}: about {need / 2**30:.3g} GiB in memory exceeds the memory limit "
+                f"of {budget / 2**30:.3g} GiB: segmenting block by block in {DEFAULT_CHUNKS}^3 "
+                "chunks (--chunks N to choose, --memory-limit to change the limit)")
+            return volume
+    return _load(input_name, *options)
 
 
 def _check_out_dir(out_dir: Path):
@@ -220,7 +262,7 @@ def _blockwise_mask(data, mask):
 
 def segment_to_files(volume, outputs, *, operator="weighted", n_regions=None,
                      min_persistence=None, value_scale=None, noise=None, seed=0, mask=None,
-                     smooth=0.0, say=lambda message: None) -> dict:
+                     smooth=0.0, engine=None, say=lambda message: None) -> dict:
     """Segment `volume` and write its output set (an entered `OutputSet`); returns the summary."""
     from .noise import add_value_noise
     from .outputs import files_sha256, summary, write_segmentation
@@ -231,11 +273,9 @@ def segment_to_files(volume, outputs, *, operator="weighted", n_regions=None,
     if _is_lazy(volume):
         from .blockwise import segment_to_zarr
 
-        if noise or smooth:
-            raise UsageError("--noise and --smooth need the volume in memory; drop --chunks")
-        _blockwise_mask(volume.data, mask)
         return segment_to_zarr(volume, outputs, operator=operator, n_regions=n_regions,
-                               min_persistence=min_persistence, value_scale=value_scale, say=say)
+                               min_persistence=min_persistence, value_scale=value_scale,
+                               engine=engine, say=say)
     data = np.asarray(volume)
     if noise:
         data = add_value_noise(data, noise, seed=seed)
@@ -258,17 +298,14 @@ def segment_to_files(volume, outputs, *, operator="weighted", n_regions=None,
 
 
 def _chunked(volume, size):
-    """`volume` with its data as a Dask array of `size`^3 chunks (clipped to the shape)."""
-    import dask.array as da
-
+    """A lazily read `volume` with its data in `size`^3 chunks (clipped to the shape:
+    a Zarr store's own chunks are rechunked)."""
     from .io import Volume
 
     if any(size > n for n in volume.shape):
         raise UsageError(f"--chunks {size} is larger than the volume {volume.path or volume.name} "
                          f"along an axis (shape {volume.shape}); use at most {min(volume.shape)}")
-    data = volume.data if _is_lazy(volume) else da.from_array(np.asarray(volume.data),
-                                                              chunks=size)
-    return Volume(data.rechunk(size), frame=volume.frame, name=volume.name,
+    return Volume(volume.data.rechunk(size), frame=volume.frame, name=volume.name,
                   source=volume.source, path=volume.path, files=volume.files)
 
 
@@ -286,6 +323,12 @@ def _segment_all(volumes, out_dir, args, say, **options):
             stack.enter_context(outputs)
             for line in outputs.recovered:
                 say(f"{outputs.folder}: {line}")
+        engine = options.get("engine")
+        if engine is not None and any(_is_lazy(v) for v in volumes):
+            # Started (or reached) after the outputs are locked and checked, before
+            # anything is computed: an unreachable scheduler writes nothing.
+            stack.enter_context(engine)
+            say(f"blockwise engine: {engine.describe()}")
         for number, (volume, outputs) in enumerate(zip(volumes, sets, strict=True), 1):
             step = say if len(volumes) == 1 else _tagged(say, f"[{number}/{len(volumes)}] ")
             summary = segment_to_files(volume, outputs, say=step, **options)
@@ -302,23 +345,31 @@ def _check_cut_options(args):
 
 
 def _cmd_segment(args):
+    from .engine import Engine
+
     say = _progress(args.quiet)
     out_dir = Path(args.out_dir)
     _check_cut_options(args)
+    engine = Engine(args.scheduler, workers=args.workers, memory_limit=args.memory_limit,
+                    progress=not args.quiet and sys.stderr.isatty())   # arguments checked here
     # Read and check every input before writing or computing anything.
-    volumes = [_load(name, args.shape, args.dtype, args.allow_external_data)
-               for name in args.inputs]
+    if args.chunks is not None and args.chunks < 2:
+        raise UsageError(f"--chunks must be at least 2 voxels, got {args.chunks}")
+    volumes = [_load_for_budget(name, args, engine.memory_limit, say) for name in args.inputs]
     if args.chunks is not None:
-        if args.chunks < 2:
-            raise UsageError(f"--chunks must be at least 2 voxels, got {args.chunks}")
         volumes = [_chunked(v, args.chunks) for v in volumes]
-    _check_out_dir(out_dir)
     mask = args.mask if args.mask_threshold is None else f"value>{args.mask_threshold!r}"
+    for volume in volumes:
+        if _is_lazy(volume):   # what the blockwise path cannot do, refused before it starts
+            if args.noise or args.smooth:
+                raise UsageError("--noise and --smooth need the volume in memory; drop --chunks")
+            _blockwise_mask(volume.data, mask)
+    _check_out_dir(out_dir)
     summaries = _segment_all(
         volumes, out_dir, args, say, operator=normalize_operator(args.operator),
         n_regions=args.regions, min_persistence=args.min_persistence,
         value_scale=args.value_scale, noise=args.noise, seed=args.seed, mask=mask,
-        smooth=args.smooth)
+        smooth=args.smooth, engine=engine)
     if args.json:
         print(_json.dumps(summaries if len(summaries) > 1 else summaries[0], indent=2))
     return 0
@@ -371,9 +422,13 @@ def _series_run(series, level, out_dir, args, say, **options):
 def _cmd_isosurface(args):
     from .io.series import read_series
 
+    from .engine import Engine
+
     say = _progress(args.quiet)
     out_dir = Path(args.out_dir)
     _check_cut_options(args)
+    engine = Engine(args.scheduler, workers=args.workers, memory_limit=args.memory_limit,
+                    progress=not args.quiet and sys.stderr.isatty())   # arguments checked here
     if not (np.isfinite(args.level)):
         raise UsageError(f"--level must be a finite number, got {args.level}")
     if not (np.isfinite(args.time_scale) and args.time_scale > 0):

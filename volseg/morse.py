@@ -617,7 +617,14 @@ class MorseHierarchy:
         `region_of_maximum`): what `segment` returns, for a caller that needs the
         regions too."""
         if type(self.cells).__module__.startswith("dask."):   # blockwise: relabel per block
-            return self.cells.map_blocks(lambda cells: region[cells], dtype=region.dtype)
+            import dask
+
+            # The table as one shared task: a distributed scheduler sends it to each
+            # worker once, not inside every block's task.
+            table = dask.delayed(region, pure=True)
+            return self.cells.map_blocks(lambda cells, table: table[cells], table,
+                                         dtype=region.dtype,
+                                         meta=np.empty((0,) * self.cells.ndim, region.dtype))
         if self.mask is None:
             return region[self.cells]
         # cells are -1 outside the mask: the table's last entry, 0, labels them.

@@ -105,9 +105,10 @@ def expected_bytes(path, shape, dtype: np.dtype) -> int:
     return count * dtype.itemsize
 
 
-def read_exact(path: Path, offset: int, shape, dtype: np.dtype) -> np.ndarray:
+def read_exact(path: Path, offset: int, shape, dtype: np.dtype, mapped: bool = False) -> np.ndarray:
     """The flat array of `shape` x `dtype` stored at `offset`, checked against the file size
-    before anything is allocated (file order, no reshape)."""
+    before anything is allocated (file order, no reshape). With `mapped`, a read-only
+    memory map of it (`MappedArray` reads it block by block)."""
     expected = expected_bytes(path, shape, dtype)
     size = regular_file_size(path)
     if offset < 0 or size - offset != expected:
@@ -115,6 +116,8 @@ def read_exact(path: Path, offset: int, shape, dtype: np.dtype) -> np.ndarray:
             f"{path}: expected {expected} bytes for shape {tuple(shape)} of {dtype.name} "
             f"(+{offset} header bytes), found {size - offset}"
         )
+    if mapped:
+        return np.memmap(path, dtype=dtype, mode="r", offset=offset, shape=(expected // dtype.itemsize,))
     with open(path, "rb") as handle:
         handle.seek(offset)
         flat = np.fromfile(handle, dtype=dtype, count=expected // dtype.itemsize)
@@ -162,3 +165,25 @@ def gunzip_bounded(path: Path, offset: int, expected: int, *, exact: bool = True
         raise VolumeFileError(
             f"{path}: expected {expected} bytes after decompression, found {len(out)}")
     return bytes(out)
+
+
+class MappedArray:
+    """A read-only view of a memory-mapped file (a reshaped / transposed `np.memmap`)
+    as an array-like for `dask.array.from_array`: each read maps the file and copies
+    out one block, so nothing holds the whole volume, and it pickles as the file name
+    and the view's layout (for distributed workers), not as the data."""
+
+    def __init__(self, view: np.memmap):
+        low, high = np.lib.array_utils.byte_bounds(view)
+        self.filename, self.file_offset = str(view.filename), int(view.offset)
+        self.extent = high - low
+        self.start = view.__array_interface__["data"][0] - low
+        self.shape, self.dtype, self.strides = view.shape, view.dtype, view.strides
+        self.ndim = view.ndim
+
+    def __getitem__(self, key):
+        mapping = np.memmap(self.filename, dtype=np.uint8, mode="r", offset=self.file_offset,
+                            shape=(self.extent,))
+        view = np.ndarray(self.shape, self.dtype, buffer=mapping, offset=self.start,
+                          strides=self.strides)
+        return np.array(view[key])

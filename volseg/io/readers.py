@@ -111,7 +111,7 @@ def _x_fastest(flat: NDArray, shape, dtype: np.dtype) -> NDArray:
 # ---------------------------------------------------------------- formats
 
 
-def _read_raw(path: Path, shape, dtype, byte_order, allow_external):
+def _read_raw(path: Path, shape, dtype, byte_order, allow_external, mapped=False):
     match = _RAW_NAME.match(path.stem)
     if shape is None:
         if match is None:
@@ -124,12 +124,12 @@ def _read_raw(path: Path, shape, dtype, byte_order, allow_external):
         dtype = match["dtype"] if match else "uint8"
     dt = _dtype(dtype, byte_order, path)
     name = match["name"] if match else path.stem
-    data = _x_fastest(read_exact(path, 0, shape, dt), shape, dt)
+    data = _x_fastest(read_exact(path, 0, shape, dt, mapped=mapped), shape, dt)
     order = "big" if dt.str[0] == ">" else "little"
     return data, None, name, f"raw {dt.name} {order}-endian, x fastest", (path,)
 
 
-def _read_dat(path: Path, shape, dtype, byte_order, allow_external):
+def _read_dat(path: Path, shape, dtype, byte_order, allow_external, mapped=False):
     size = regular_file_size(path)
     with open(path, "rb") as handle:
         head = handle.read(min(size, MAX_HEADER_BYTES + 1))
@@ -146,7 +146,7 @@ def _read_dat(path: Path, shape, dtype, byte_order, allow_external):
             raise VolumeFileError(f"{path}: the 'SliceThickness' field must be positive, "
                                   f"got {fields['slicethickness']!r}")
         dt = _dtype(dtype or fields.get("format", "uchar"), byte_order, path)
-        data = _x_fastest(read_exact(data_path, 0, res, dt), res, dt)
+        data = _x_fastest(read_exact(data_path, 0, res, dt, mapped=mapped), res, dt)
         return (data, Frame.from_spacing(spacing), data_path.stem.split("_")[0],
                 f".dat header + raw {dt.name}", (path, data_path))
     # Old binary .dat: three uint16 sizes, then the voxels (uint16 unless the size says uint8).
@@ -158,7 +158,7 @@ def _read_dat(path: Path, shape, dtype, byte_order, allow_external):
         dtype = "uint8" if count and size - 6 == count else "uint16"
     dt = _dtype(dtype, byte_order, path)
     res = shape or sizes
-    data = _x_fastest(read_exact(path, 6, res, dt), res, dt)
+    data = _x_fastest(read_exact(path, 6, res, dt, mapped=mapped), res, dt)
     return data, None, path.stem, f"binary .dat, {dt.name}", (path,)
 
 
@@ -191,7 +191,7 @@ def _nrrd_frame(path, fields) -> Frame | None:
     return None
 
 
-def _read_nrrd(path: Path, shape, dtype, byte_order, allow_external):
+def _read_nrrd(path: Path, shape, dtype, byte_order, allow_external, mapped=False):
     regular_file_size(path)
     head, data_offset = read_head(path, b"\n\n")
     if not head.startswith(b"NRRD"):
@@ -232,7 +232,7 @@ def _read_nrrd(path: Path, shape, dtype, byte_order, allow_external):
             raise VolumeFileError(f"{path}: the 'byte skip' field must be -1 or >= 0, got {skip}")
         else:
             offset += skip
-        flat = read_exact(data_path, offset, shape, dt)
+        flat = read_exact(data_path, offset, shape, dt, mapped=mapped)
     else:
         if skip < 0:
             raise VolumeFileError(f"{path}: 'byte skip: {skip}' is only defined for raw encoding")
@@ -244,7 +244,7 @@ def _read_nrrd(path: Path, shape, dtype, byte_order, allow_external):
             f"NRRD {encoding} {dt.name}", files)
 
 
-def _read_nifti(path: Path, shape, dtype, byte_order, allow_external):
+def _read_nifti(path: Path, shape, dtype, byte_order, allow_external, mapped=False):
     import nibabel
 
     regular_file_size(path)
@@ -286,7 +286,7 @@ def _read_nifti(path: Path, shape, dtype, byte_order, allow_external):
     return data, frame, name, f"NIfTI {data.dtype}", (path,)
 
 
-def _read_npy(path: Path, shape, dtype, byte_order, allow_external):
+def _read_npy(path: Path, shape, dtype, byte_order, allow_external, mapped=False):
     fmt = np.lib.format
     regular_file_size(path)
     try:
@@ -301,7 +301,7 @@ def _read_npy(path: Path, shape, dtype, byte_order, allow_external):
         raise VolumeFileError(f"{path}: not a plain .npy array ({type(err).__name__}: {err})") from None
     if dt.hasobject or dt.kind not in "biuf":
         raise VolumeFileError(f"{path}: voxel type {dt} is not a real number type")
-    flat = read_exact(path, offset, data_shape, dt)
+    flat = read_exact(path, offset, data_shape, dt, mapped=mapped)
     data = flat.reshape(data_shape, order="F" if fortran else "C")
     return data.astype(dt.newbyteorder("="), copy=False), None, path.stem, f"npy {dt}", (path,)
 
@@ -313,6 +313,21 @@ def _check(path, data: NDArray) -> NDArray:
     while data.ndim > 3 and data.shape[-1] == 1:
         data = data[..., 0]
     return _validate.volume_array(data, source=path, error=VolumeFileError)
+
+
+def _lazy(path, data: NDArray, chunks):
+    """A Dask array of `data`: block reads of the file when it is memory-mapped."""
+    import dask.array as da
+
+    from ._files import MappedArray
+
+    while data.ndim > 3 and data.shape[-1] == 1:
+        data = data[..., 0]
+    if isinstance(data, np.memmap):
+        lazy = da.from_array(MappedArray(data), chunks=chunks, asarray=True, fancy=False,
+                             name=f"mapped-{path.name}-{id(data)}")
+        return _validate.lazy_volume_array(lazy, name=str(path))
+    return da.from_array(_check(path, data), chunks=chunks)
 
 
 def _reader(path: Path):
@@ -329,7 +344,7 @@ def _reader(path: Path):
 
 
 def read_volume(path, *, shape=None, dtype=None, byte_order=None,
-                allow_external_data: bool = False) -> Volume:
+                allow_external_data: bool = False, chunks=None) -> Volume:
     """Read a volume from a file, by extension.
 
     Parameters
@@ -350,6 +365,13 @@ def read_volume(path, *, shape=None, dtype=None, byte_order=None,
         Let a detached header (``.nhdr`` ``data file:``, ``.dat`` ``ObjectFileName:``)
         name a data file outside its own folder. Off by default: a header from
         elsewhere cannot make volseg read, and publish a checksum of, any file.
+    chunks : int or tuple, optional
+        Read lazily: the Volume's data is a Dask array of these chunks (for the
+        blockwise path). Uncompressed data (raw, .dat, raw-encoded NRRD, .npy) is
+        memory-mapped and read block by block, never whole, and its finiteness is
+        checked block by block when computed; compressed data (.nii.gz, gzip NRRD),
+        NIfTI and big-endian data are read whole first. Zarr stores keep their own
+        chunks (rechunk the data to change them).
 
     Returns
     -------
@@ -386,10 +408,13 @@ def read_volume(path, *, shape=None, dtype=None, byte_order=None,
     regular_file_size(path)  # missing, a folder, a device or a pipe: refused before opening
     try:
         data, frame, short, source, files = _reader(path)(path, shape, dtype, byte_order,
-                                                          allow_external_data)
+                                                          allow_external_data, mapped=chunks is not None)
     except MemoryError:
         raise VolumeFileError(f"{path}: the declared size does not fit in this machine's memory") from None
-    data = _check(path, data)
+    if chunks is not None:
+        data = _lazy(path, data, chunks)
+    else:
+        data = _check(path, data)
     if frame is None:
         frame = Frame.from_spacing((1.0, 1.0, 1.0))
     spacing = frame.spacing

@@ -131,8 +131,9 @@ class _Checked:
                                   f"({type(err).__name__}: {err})") from None
 
 
-def write_zarr(path, data, *, frame: Frame | None = None, chunks=None) -> Path:
-    """Write `data` (Dask or numpy, [x, y, z]) as a Zarr v3 array at `path` with its frame."""
+def write_zarr(path, data, *, frame: Frame | None = None, chunks=None, compute=None) -> Path:
+    """Write `data` (Dask or numpy, [x, y, z]) as a Zarr v3 array at `path` with its
+    frame. `compute(delayed)`, if given, runs the writes (e.g. with a progress bar)."""
     import dask.array as da
     import zarr
 
@@ -146,5 +147,8 @@ def write_zarr(path, data, *, frame: Frame | None = None, chunks=None) -> Path:
                               config={"write_empty_chunks": True})
     store.attrs["volseg"] = {"axes": "xyz", "spacing": list(frame.spacing),
                              "affine": np.asarray(frame.affine).tolist()}
-    da.store(lazy, store, lock=False)
+    if compute is None:
+        da.store(lazy, store, lock=False)
+    else:
+        compute(da.store(lazy, store, lock=False, compute=False))
     return Path(path)

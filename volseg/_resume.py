@@ -1,0 +1,81 @@
+"""A blockwise run's finished blocks, kept on disk so that a killed run resumes.
+
+``WorkFolder(folder, key)`` is ``<out>/.<stem>.volseg-work`` (under the output set's
+lock). `key` is every input of the run that changes a block's result (the input
+files' checksum, operator, boundary, value scale, chunks, connectivity, volseg's
+version); it is kept in ``key.json``, and a folder holding another key is emptied
+before use, so a block is only ever reused by the run that would compute it again
+bit for bit.
+
+``wrap(stage, function)`` returns the per-block `function(*blocks, block_id=...)`
+with its result (an array or a tuple of arrays) saved as
+``<stage>/<i>_<j>_<k>.npz`` when computed, and loaded instead of computed when
+present. A file appears by atomic rename once complete, so a run killed mid-write
+leaves no block that looks finished. The pipeline removes the folder once its
+outputs are committed.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["WorkFolder"]
+
+
+class WorkFolder:
+    def __init__(self, folder, key: dict):
+        self.folder = Path(folder)
+        self.key = json.loads(json.dumps(key))        # as stored: lists, not tuples
+        stored = self.folder / "key.json"
+        try:
+            same = json.loads(stored.read_text()) == self.key
+        except (OSError, ValueError):
+            same = False
+        if not same:
+            shutil.rmtree(self.folder, ignore_errors=True)
+            self.folder.mkdir(parents=True)
+            temporary = stored.with_suffix(".tmp")
+            temporary.write_text(json.dumps(self.key, indent=1))
+            os.replace(temporary, stored)
+        self.resumed = same
+
+    def finished(self, stage: str) -> int:
+        """How many blocks of `stage` are on disk."""
+        folder = self.folder / stage
+        return sum(1 for p in folder.glob("*.npz")) if folder.is_dir() else 0
+
+    def wrap(self, stage: str, function):
+        folder = self.folder / stage
+        folder.mkdir(exist_ok=True)
+        return _Cached(str(folder), function)
+
+    def remove(self):
+        shutil.rmtree(self.folder, ignore_errors=True)
+
+
+class _Cached:
+    """A per-block function whose results are kept in a folder (picklable, for
+    distributed workers: a path and the function)."""
+
+    def __init__(self, folder: str, function):
+        self.folder, self.function = folder, function
+
+    def __call__(self, *blocks, block_id=None):
+        path = os.path.join(self.folder, "_".join(map(str, block_id)) + ".npz")
+        if os.path.exists(path):
+            with np.load(path) as saved:
+                if "array" in saved.files:
+                    return saved["array"]
+                return tuple(saved[f"item{i}"] for i in range(len(saved.files)))
+        result = self.function(*blocks, block_id=block_id)
+        items = ({"array": result} if isinstance(result, np.ndarray)
+                 else {f"item{i}": np.asarray(r) for i, r in enumerate(result)})
+        temporary = path[:-4] + f".{os.getpid()}.tmp.npz"
+        np.savez(temporary, **items)
+        os.replace(temporary, path)
+        return result
