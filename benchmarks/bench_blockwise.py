@@ -1,6 +1,7 @@
 """Blockwise vs in-memory `volseg segment`, end to end, side by side (issue 14).
 
     python benchmarks/bench_blockwise.py --sizes 256 512 [--chunks 128] [--workers 1 2]
+                                         [--schedulers threads local]
                                          [--skip-in-memory-above 512] [--folder /tmp/bw]
 
 For each size N it writes a synthetic smooth uint8 field of N^3 voxels straight to a
@@ -9,8 +10,9 @@ coordinates, so no full array is ever built), then runs, each in its own process
 
 - ``volseg segment field.npy --mask none`` (in memory; the .npy is written block by
   block through a memory map) when N <= --skip-in-memory-above;
-- ``volseg segment field.zarr`` (blockwise), once per --workers value (Dask's
-  threaded scheduler with that many workers, ``DASK_NUM_WORKERS``).
+- ``volseg segment field.zarr`` (blockwise), once per --schedulers x --workers value
+  (``--scheduler threads``: Dask's threaded scheduler; ``local``: a local
+  dask.distributed cluster of that many worker processes).
 
 It prints wall time, the peak memory of the whole process tree (RSS summed over the
 process and its children, sampled every 0.1 s with psutil), the region count, and
@@ -96,6 +98,7 @@ def main(argv=None) -> int:
     parser.add_argument("--sizes", type=int, nargs="+", default=[256, 512])
     parser.add_argument("--chunks", type=int, default=128)
     parser.add_argument("--workers", type=int, nargs="+", default=[2])
+    parser.add_argument("--schedulers", nargs="+", default=["threads"])
     parser.add_argument("--skip-in-memory-above", type=int, default=512)
     parser.add_argument("--folder", default="/tmp/volseg-bench-blockwise")
     args = parser.parse_args(argv)
@@ -118,18 +121,20 @@ def main(argv=None) -> int:
             print(f"{n}^3 in memory: {result['seconds']:.1f} s, peak {result['peak_gb']:.2f} GB",
                   flush=True)
             reference = np.asarray(labels_of(out, f"field{n}")[...])
-        for workers in args.workers:
-            out = folder / f"blk{n}_{workers}"
-            result = run([*volseg, str(zarr_path), "-o", str(out)],
-                         env={"DASK_NUM_WORKERS": str(workers)})
+        for scheduler, workers in ((s, w) for s in args.schedulers for w in args.workers):
+            out = folder / f"blk{n}_{scheduler}_{workers}"
+            result = run([*volseg, str(zarr_path), "-o", str(out), "--scheduler", scheduler,
+                          "--workers", str(workers)])
             summary = json.loads(result["stdout"])
             same = None
             if reference is not None:
                 same = bool(np.array_equal(np.asarray(labels_of(out, f"field{n}")[...]), reference))
-            rows.append({"size": n, "path": f"blockwise {args.chunks}^3", "workers": workers,
+            rows.append({"size": n, "path": f"blockwise {args.chunks}^3 {scheduler}",
+                         "workers": workers,
                          **result, "regions": summary["n_regions"], "same_labels": same,
                          "phases": summary.get("blockwise", {}).get("morse_phases_s")})
-            print(f"{n}^3 blockwise, {workers} workers: {result['seconds']:.1f} s, peak "
+            print(f"{n}^3 blockwise {scheduler}, {workers} workers: {result['seconds']:.1f} s, "
+                  "peak "
                   f"{result['peak_gb']:.2f} GB, same labels as in memory: {same}", flush=True)
     print("\n| size | path | workers | wall s | peak GB (all processes) | regions | same labels |")
     print("| --- | --- | --- | --- | --- | --- | --- |")

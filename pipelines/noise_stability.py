@@ -205,12 +205,15 @@ def _store(out_dir):
 
 
 def _client(scheduler, workers):
+    import dask
     from dask.distributed import Client, LocalCluster
 
     if scheduler:
+        previous = dask.config.get("scheduler", None)
         try:
             return Client(scheduler, timeout="10s")
         except (OSError, ValueError, TimeoutError) as err:
+            dask.config.set(scheduler=previous)   # the failed Client left itself the default
             raise UsageError(f"--scheduler {scheduler}: cannot connect "
                              f"({' '.join(str(err).split()) or type(err).__name__})") from None
     cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1,

@@ -87,16 +87,31 @@ def _resolve(keys, ends):
     raise RuntimeError("blockwise Morse: path ends did not resolve (a bug)")
 
 
-def _cells_of_block(halo, origin, shape, offsets, layer_keys, layer_ends, maxima_sorted,
-                    maxima_ids):
-    """Stage 3: the maximum id of every owned voxel."""
+def _cells_of_block(halo, origin, shape, offsets, keys, ids):
+    """Stage 3: the maximum id of every owned voxel, from the block's own table
+    (`_block_tables`)."""
     result, _ = _ascend(halo, origin, shape, offsets)
     # A block reaches few distinct ends: look those up, not every voxel.
     ends, inverse = np.unique(result.ravel(), return_inverse=True)
-    leaving = ends < 0
-    ends[leaving] = layer_ends[np.searchsorted(layer_keys, -1 - ends[leaving])]
-    ids = maxima_ids[np.searchsorted(maxima_sorted, ends)]
-    return ids[inverse].reshape(result.shape)
+    ends[ends < 0] = -1 - ends[ends < 0]         # an exit: the neighbour's voxel it enters
+    return ids[np.searchsorted(keys, ends)][inverse].reshape(result.shape)
+
+
+def _block_tables(summaries, layer_keys, layer_ends, maxima_sorted, maxima_ids):
+    """Per block, the maximum id of every end its paths reach: its own maxima (by gid)
+    and the neighbours' outer-layer voxels its paths exit to (by their gid; a path from
+    inside leaves through the block's own outer layer, so these are that layer's
+    exits). Each block's task then carries its own small table, not the whole
+    volume's outer layers and maxima (which every worker would otherwise hold)."""
+    tables = []
+    for own, _, _, ends in summaries:
+        exits = np.unique(-1 - ends[ends < 0])
+        reached = layer_ends[np.searchsorted(layer_keys, exits)]
+        keys = np.concatenate([own, exits])
+        gids = np.concatenate([own, reached])
+        order = np.argsort(keys)
+        tables.append((keys[order], maxima_ids[np.searchsorted(maxima_sorted, gids[order])]))
+    return tables
 
 
 def _pairs_of_block(halo_values, halo_cells, origin, shape, offsets):
@@ -156,6 +171,14 @@ def _per_block(function, *arrays, **kwargs):
                          chunks=tuple((1,) * len(c) for c in arrays[0].chunks), meta=np.empty((0,) * 3, object))
 
 
+def _gather(blocks, compute, stage) -> list:
+    """The per-block results of `_per_block`, in block order, each fetched as its own
+    result: no task concatenates them first (on a cluster, that task's worker would
+    hold every block's result at once)."""
+    results = compute(*blocks.to_delayed(optimize_graph=False).ravel(), stage=stage)
+    return [block.flat[0] for block in results]      # each a 1x1x1 object array
+
+
 def dask_descending_complex(field, connectivity="kuhn", persist=None, wrap=None, compute=None):
     """`descending_complex` of a 3-D Dask array (see the module docstring).
 
@@ -190,15 +213,13 @@ def dask_descending_complex(field, connectivity="kuhn", persist=None, wrap=None,
     def origin(block_id):
         return np.array([starts[d][block_id[d]] for d in range(3)], dtype=np.int64)
 
-    summaries, = compute(_per_block(wrap("ascent", lambda h, block_id: _summary_of_block(
-        h, origin(block_id), shape, offsets)), halo), stage="Morse: steepest ascent per block")
-    summaries = list(summaries.ravel())
+    summaries = _gather(_per_block(wrap("ascent", lambda h, block_id: _summary_of_block(
+        h, origin(block_id), shape, offsets)), halo), compute, "Morse: steepest ascent per block")
     phases.done("blocks: steepest ascent, path compression")
     maxima = np.concatenate([s[0] for s in summaries])
     maxima_values = np.concatenate([s[1] for s in summaries])
     layer_keys, layer_ends = _resolve(np.concatenate([s[2] for s in summaries]),
                                       np.concatenate([s[3] for s in summaries]))
-    del summaries
     order = np.lexsort((maxima, maxima_values))[::-1]       # decreasing (value, index)
     maxima, maxima_values = maxima[order], maxima_values[order]
     index_type = np.int32 if len(maxima) < 2**31 - 1 else np.int64
@@ -206,22 +227,26 @@ def dask_descending_complex(field, connectivity="kuhn", persist=None, wrap=None,
     maxima_sorted, maxima_ids = maxima[by_gid], by_gid.astype(index_type)
     phases.done("client: exits resolved, maxima ordered")
 
-    def cells_of(h, tables, block_id=None):
-        return _cells_of_block(h, origin(block_id), shape, offsets, *tables)
+    grid = tuple(len(c) for c in values.chunks)
+    tables = np.empty(grid, dtype=object)
+    for index, table in zip(np.ndindex(grid), _block_tables(summaries, layer_keys, layer_ends,
+                                                            maxima_sorted, maxima_ids), strict=True):
+        tables[index] = table
+    del summaries, layer_keys, layer_ends
+    tables = da.from_array(tables, chunks=1, name=False)
 
-    # The lookup tables as one shared task: a distributed scheduler sends them to each
-    # worker once, not inside every block's task.
-    tables = dask.delayed((layer_keys, layer_ends, maxima_sorted, maxima_ids), pure=True)
+    def cells_of(h, table, block_id=None):
+        return _cells_of_block(h, origin(block_id), shape, offsets, *table.flat[0])
+
     cells = halo.map_blocks(wrap("cells", cells_of), tables, dtype=index_type,
                             chunks=values.chunks, meta=np.empty((0, 0, 0), index_type))
     if persist is not None:
         cells = persist(cells)
         phases.done("blocks: cells (stored)")
     halo_cells = da.overlap.overlap(cells.astype(np.int64), depth=1, boundary=-1)
-    pairs, = compute(_per_block(wrap("pairs", lambda h, c, block_id: _pairs_of_block(
-        h, c, origin(block_id), shape, offsets)), halo, halo_cells),
-        stage="Morse: cross-cell edges and spanning forest per block")
-    pairs = list(pairs.ravel())
+    pairs = _gather(_per_block(wrap("pairs", lambda h, c, block_id: _pairs_of_block(
+        h, c, origin(block_id), shape, offsets)), halo, halo_cells), compute,
+        "Morse: cross-cell edges and spanning forest per block")
     phases.done("blocks: cells and cross-cell edges")
     edge_a, edge_b, edge_v, edge_f = _highest_per_pair(
         *(np.concatenate([p[k] for p in pairs]) for k in range(4)))

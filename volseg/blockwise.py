@@ -87,7 +87,8 @@ def segment_to_zarr(volume, outputs, *, operator="weighted", n_regions=None, min
             "operator": entry.name, "value_scale": scale, "boundary": boundary,
             "connectivity": "kuhn"})
         if work.resumed:
-            done = {stage: work.finished(stage) for stage in ("curvature", "ascent", "cells", "pairs")}
+            done = {stage: work.finished(stage)
+                    for stage in ("curvature", "ascent", "cells", "pairs")}
             say(f"{volume.name}: resuming from finished blocks in {work.folder} "
                 f"({', '.join(f'{stage} {n}' for stage, n in done.items())})")
         say(f"{volume.name}: curvature ({entry.name}) of a {'x'.join(map(str, data.shape))} volume "

@@ -422,13 +422,9 @@ def _series_run(series, level, out_dir, args, say, **options):
 def _cmd_isosurface(args):
     from .io.series import read_series
 
-    from .engine import Engine
-
     say = _progress(args.quiet)
     out_dir = Path(args.out_dir)
     _check_cut_options(args)
-    engine = Engine(args.scheduler, workers=args.workers, memory_limit=args.memory_limit,
-                    progress=not args.quiet and sys.stderr.isatty())   # arguments checked here
     if not (np.isfinite(args.level)):
         raise UsageError(f"--level must be a finite number, got {args.level}")
     if not (np.isfinite(args.time_scale) and args.time_scale > 0):

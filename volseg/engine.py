@@ -37,6 +37,7 @@ import sys
 __all__ = ["Engine", "EngineError", "default_memory_limit", "parse_bytes"]
 
 MEMORY_SHARE = 0.5          # of physical RAM, the default budget of a local cluster
+CONNECT_TIMEOUT = 10.0      # seconds to reach a running scheduler
 
 
 class EngineError(ValueError):
@@ -73,7 +74,7 @@ class Engine:
     """A context manager: the Dask engine of a blockwise run (see the module)."""
 
     def __init__(self, scheduler: str | None = None, *, workers: int | None = None,
-                 memory_limit=None, progress: bool = False, timeout: float = 10.0):
+                 memory_limit=None, progress: bool = False, timeout: float | None = None):
         if workers is not None and workers < 1:
             raise EngineError(f"--workers must be at least 1, got {workers}")
         self.scheduler = scheduler
@@ -81,7 +82,7 @@ class Engine:
         self.memory_limit = (default_memory_limit() if memory_limit is None
                              else parse_bytes(memory_limit))
         self.progress = progress
-        self.timeout = timeout
+        self.timeout = CONNECT_TIMEOUT if timeout is None else timeout
         self.client = None
         self._stack = contextlib.ExitStack()
 
@@ -121,14 +122,20 @@ class Engine:
     def _client(self):
         import logging
 
+        import dask
         from distributed import Client, LocalCluster
 
         # Its INFO lines (worker start, shutdown) are not volseg's progress.
         logging.getLogger("distributed").setLevel(logging.WARNING)
         if self.scheduler != "local":
+            previous = dask.config.get("scheduler", None)
             try:
                 return Client(self.scheduler, timeout=f"{self.timeout}s")
             except (OSError, TimeoutError, ValueError) as err:
+                # The Client made itself Dask's default before it tried to connect, and
+                # leaves that behind when it fails: every later compute would then ask
+                # for a client that does not exist.
+                dask.config.set(scheduler=previous)
                 raise EngineError(f"cannot reach the Dask scheduler at {self.scheduler} "
                                   f"({type(err).__name__}: {err})") from None
         # One thread per worker, and one for numba's parallel loops inside it: the
