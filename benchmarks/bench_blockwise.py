@@ -24,6 +24,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
 import subprocess
 import sys
 import time
@@ -50,15 +51,21 @@ def write_inputs(folder: Path, n: int, chunks: int, npy: bool):
 
     lazy = da.map_blocks(lambda block_info=None: smooth_block(block_info, n), dtype=np.uint8,
                          chunks=((chunks,) * (n // chunks) + ((n % chunks,) if n % chunks else ()),) * 3)
+    # Written under a temporary name and renamed: an interrupted benchmark leaves no
+    # partial input that the next one would take as ready.
     zarr_path = folder / f"field{n}.zarr"
     if not zarr_path.exists():
-        write_zarr(zarr_path, lazy)
+        shutil.rmtree(folder / f"field{n}.tmp.zarr", ignore_errors=True)
+        write_zarr(folder / f"field{n}.tmp.zarr", lazy)
+        os.replace(folder / f"field{n}.tmp.zarr", zarr_path)
     npy_path = folder / f"field{n}.npy"
     if npy and not npy_path.exists():
-        out = np.lib.format.open_memmap(npy_path, mode="w+", dtype=np.uint8, shape=(n, n, n))
+        temporary = folder / f"field{n}.tmp.npy"
+        out = np.lib.format.open_memmap(temporary, mode="w+", dtype=np.uint8, shape=(n, n, n))
         da.store(lazy, out, lock=False)
         out.flush()
         del out
+        os.replace(temporary, npy_path)
     return zarr_path, npy_path
 
 

@@ -26,8 +26,6 @@ the next run) without stopping the others.
 from __future__ import annotations
 
 import argparse
-import logging
-import os
 import sqlite3
 import sys
 import time
@@ -204,22 +202,15 @@ def _store(out_dir):
         raise UsageError(str(err)) from None
 
 
-def _client(scheduler, workers):
-    import dask
-    from dask.distributed import Client, LocalCluster
+def _engine(scheduler, workers):
+    """The run's `volseg.engine.Engine`, entered: a LocalCluster of single-threaded
+    worker processes (one per core) or the running scheduler at `scheduler`."""
+    from volseg.engine import Engine, EngineError
 
-    if scheduler:
-        previous = dask.config.get("scheduler", None)
-        try:
-            return Client(scheduler, timeout="10s")
-        except (OSError, ValueError, TimeoutError) as err:
-            dask.config.set(scheduler=previous)   # the failed Client left itself the default
-            raise UsageError(f"--scheduler {scheduler}: cannot connect "
-                             f"({' '.join(str(err).split()) or type(err).__name__})") from None
-    cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1,
-                           processes=True, dashboard_address=None,
-                           silence_logs=logging.ERROR)
-    return Client(cluster)
+    try:
+        return Engine(scheduler or "local", workers=workers).__enter__()
+    except EngineError as err:
+        raise UsageError(f"--scheduler {scheduler}: {' '.join(str(err).split())}") from None
 
 
 class _Progress:
@@ -279,7 +270,8 @@ def run(datasets, out_dir, *, operators=DEFAULT_OPERATORS, levels=DEFAULT_LEVELS
             f"({counts['already_done']} already in {store.path})")
         start = time.perf_counter()
         progress = _Progress(len(pending), say)
-        client = _client(scheduler, workers)
+        engine = _engine(scheduler, workers)
+        client = engine.client
         try:
             needed = {t["dataset"] for t in pending}
             scattered = {name: client.scatter(volume, hash=False)
@@ -316,10 +308,7 @@ def run(datasets, out_dir, *, operators=DEFAULT_OPERATORS, levels=DEFAULT_LEVELS
                     progress.tick()
                 future.release()
         finally:
-            cluster = getattr(client, "cluster", None)
-            client.close()
-            if cluster is not None:
-                cluster.close()
+            engine.__exit__(None, None, None)
         for error, n in errors.items():
             say(f"{n} task{'s' if n > 1 else ''} failed with {error}")
         counts["seconds"] = time.perf_counter() - start

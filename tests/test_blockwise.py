@@ -130,3 +130,15 @@ def test_segment_volume_of_a_dask_array_equals_in_memory(small):
     assert lazy.min_persistence == eager.min_persistence and lazy.n_regions == eager.n_regions
     with pytest.raises(ValueError, match="without a mask or smoothing"):
         segment_volume(da.from_array(small, chunks=10), mask="nonzero")
+
+
+@pytest.mark.parametrize("chunks", [((7, 7, 9), (17,), (2, 2, 2, 3)), ((1, 22), (5, 5, 7), (9,))])
+def test_halo_equals_dask_overlap(chunks):
+    """`_halo.with_halo` (layers copied, blocks freed) gives dask's overlap, block for block."""
+    from volseg._halo import with_halo
+
+    x = da.from_array(np.random.default_rng(0).random((23, 17, 9)), chunks=chunks)
+    for value in (-np.inf, -1.0):
+        ours, theirs = with_halo(x, value), da.overlap.overlap(x, depth=1, boundary=value)
+        assert ours.chunks == theirs.chunks
+        assert np.array_equal(ours.compute(scheduler="sync"), theirs.compute(scheduler="sync"))

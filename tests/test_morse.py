@@ -150,15 +150,16 @@ def test_bad_input_is_a_clear_error():
 
 def test_morse_imports_only_its_kernels_and_the_kuhn_leaf():
     """morse stays usable on its own: of volseg it imports only `_morse_kernels`, `_kuhn`
-    and its blockwise half `_morse_blocks` (which imports only morse and the kernels);
-    the kernels and `_kuhn` import nothing of volseg themselves."""
+    and its blockwise half `_morse_blocks` (which imports only morse, the kernels and
+    `_halo`); the kernels, `_halo` and `_kuhn` import nothing of volseg themselves."""
     import ast
     import inspect
 
     import volseg._morse_blocks as blocks
     import volseg.morse as morse
 
-    family = {"morse", "_morse_kernels", "_kuhn", "_morse_blocks", "_morse_block_kernels"}
+    family = {"morse", "_morse_kernels", "_kuhn", "_morse_blocks", "_morse_block_kernels",
+              "_halo"}
     for module, allowed in ((morse, (["_morse_kernels"], ["_kuhn"], ["dask_descending_complex"])),
                             (blocks, None)):
         for node in ast.walk(ast.parse(inspect.getsource(module))):
@@ -172,10 +173,11 @@ def test_morse_imports_only_its_kernels_and_the_kuhn_leaf():
             if isinstance(node, ast.Import):
                 assert not any(a.name.startswith("volseg") for a in node.names)
     import volseg._kuhn as kuhn
+    import volseg._halo as halo
     import volseg._morse_block_kernels as block_kernels
     import volseg._morse_kernels as kernels
 
-    for leaf in (kuhn, kernels, block_kernels):
+    for leaf in (kuhn, kernels, block_kernels, halo):
         for node in ast.walk(ast.parse(inspect.getsource(leaf))):
             assert not (isinstance(node, ast.ImportFrom) and node.level), ast.dump(node)
 

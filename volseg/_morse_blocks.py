@@ -1,7 +1,8 @@
 """`descending_complex` of a 3-D Dask array: the in-memory build, block by block
 (DESIGN.md section 10).
 
-1. Per block, with a 1-voxel halo (-inf outside the volume): steepest ascent and path
+1. Per block, with a 1-voxel halo (-inf outside the volume; `volseg._halo`, which
+   frees each block once its halo layers are copied): steepest ascent and path
    compression inside the block (`_morse_block_kernels.ascend`). A path ends at a
    maximum of the block or leaves it; a path that leaves lands on a neighbouring
    block's outer layer. Each block returns its maxima and the ends of its outer
@@ -28,6 +29,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import _morse_block_kernels as kernels
+from ._halo import with_halo
 
 __all__ = ["dask_descending_complex"]
 
@@ -207,7 +209,7 @@ def dask_descending_complex(field, connectivity="kuhn", persist=None, wrap=None,
     shape = np.array(field.shape, dtype=np.int64)
     offsets = np.ascontiguousarray(grid_offsets(3, connectivity), dtype=np.int64)
     values = field.astype(np.float64)
-    halo = da.overlap.overlap(values, depth=1, boundary=-np.inf)
+    halo = with_halo(values, -np.inf)
     starts = _origins(values.chunks)
 
     def origin(block_id):
@@ -243,7 +245,7 @@ def dask_descending_complex(field, connectivity="kuhn", persist=None, wrap=None,
     if persist is not None:
         cells = persist(cells)
         phases.done("blocks: cells (stored)")
-    halo_cells = da.overlap.overlap(cells.astype(np.int64), depth=1, boundary=-1)
+    halo_cells = with_halo(cells.astype(np.int64), -1)
     pairs = _gather(_per_block(wrap("pairs", lambda h, c, block_id: _pairs_of_block(
         h, c, origin(block_id), shape, offsets)), halo, halo_cells), compute,
         "Morse: cross-cell edges and spanning forest per block")

@@ -85,7 +85,7 @@ def segment_to_zarr(volume, outputs, *, operator="weighted", n_regions=None, min
             "volseg": __version__, "input": checksum, "shape": list(data.shape),
             "chunks": [list(c) for c in data.chunks], "spacing": list(spacing),
             "operator": entry.name, "value_scale": scale, "boundary": boundary,
-            "connectivity": "kuhn"})
+            "connectivity": "kuhn", "block_layout": 2})   # 2: curvature blocks = input chunks
         if work.resumed:
             done = {stage: work.finished(stage)
                     for stage in ("curvature", "ascent", "cells", "pairs")}

@@ -220,7 +220,7 @@ def test_a_results_file_with_other_keys_is_refused(tmp_path, capsys):
 
 def test_unreachable_or_malformed_scheduler_is_one_line_exit_2(tiny, tmp_path, capsys):
     for address, message in [("not-an-address", "missing port number"),
-                             ("tcp://127.0.0.1:9", "cannot connect")]:
+                             ("tcp://127.0.0.1:9", "cannot reach")]:
         assert ns.main(["--out", str(tmp_path), "--datasets", tiny[0], "--seeds", "1",
                         "--levels", "0", "--operators", "weighted", "--scheduler", address,
                         "-q"]) == 2
