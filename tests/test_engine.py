@@ -158,3 +158,15 @@ def test_no_worker_holds_the_volume_at_once(tmp_path):
     whole = 36**3 * 8                                     # the volume in float64
     assert info["n_regions"] >= 1 and peak.peak > 0
     assert peak.peak < 2 * whole, peak.peak
+
+
+def test_an_input_above_the_memory_limit_takes_the_blockwise_path(tmp_path, volume, capsys):
+    np.save(tmp_path / "vol.npy", volume)
+    argv = ["segment", str(tmp_path / "vol.npy"), "--mask", "none", "--scheduler", "threads"]
+    assert main([*argv, "--memory-limit", "1000", "-o", str(tmp_path / "small")]) == 0
+    assert "exceeds the memory limit" in capsys.readouterr().err
+    assert (tmp_path / "small" / "vol_labels.zarr").is_dir()
+    assert main([*argv, "-o", str(tmp_path / "big"), "-q"]) == 0          # default: half the RAM
+    assert (tmp_path / "big" / "vol_labels.nii.gz").is_file()
+    assert np.array_equal(zarr.open(str(tmp_path / "small" / "vol_labels.zarr"), mode="r")[:],
+                          np.asarray(read_volume(tmp_path / "big" / "vol_labels.nii.gz").data))

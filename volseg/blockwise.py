@@ -7,9 +7,9 @@ before from disk instead: inside the output set's staging folder,
 1. the value scale (one pass over the volume: min and max);
 2. the curvature, block by block with its halo, written to ``<stem>_curvature.zarr``
    (float64, so that the Morse stage reads exactly what it would in memory);
-3. the Morse hierarchy from that store (`descending_complex` on Dask: two passes over
-   its blocks, the cells written once to the staging folder, the cell graph on this
-   process);
+3. the Morse hierarchy from that store (`descending_complex` on Dask: three passes
+   over its blocks, the cells computed once into the work folder below, the cell
+   graph on this process);
 4. the labels, block by block, written to ``<stem>_labels.zarr``;
 5. the summary (region sizes: one pass over the labels) and the preview (three mid
    slices: read, not computed).
@@ -21,8 +21,9 @@ Every per-block result (curvature, ascent summaries, cells, edges) is also kept 
 ``<out>/.<stem>.volseg-work`` (`volseg._resume.WorkFolder`, keyed by the inputs'
 checksum and every parameter) until the set is committed: a killed run, rerun with
 the same arguments, loads its finished blocks instead of computing them. The stages
-run on the `volseg.engine.Engine` entered by the caller (a local dask.distributed
-cluster from the command line), or on Dask's current scheduler.
+run on the `volseg.engine.Engine` entered by the caller (from the command line:
+threads by default, `--scheduler local` or an address for dask.distributed), or on
+Dask's current scheduler.
 """
 
 from __future__ import annotations

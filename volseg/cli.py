@@ -72,8 +72,10 @@ def _get_parser() -> argparse.ArgumentParser:
     engine.add_argument("--workers", type=int, metavar="N",
                         help="threads or local workers (default: one per core)")
     engine.add_argument("--memory-limit", metavar="BYTES",
-                        help="memory budget of the local cluster's workers together, e.g. 12GB "
-                        f"or 0.5 (a share of RAM; default {MEMORY_SHARE:g} of this machine's RAM)")
+                        help="memory budget, e.g. 12GB or 0.5 (a share of RAM; default "
+                        f"{MEMORY_SHARE:g} of this machine's RAM): an input whose in-memory run "
+                        "would need more (about 40 bytes per voxel) is segmented block by block; "
+                        "also the local cluster's worker limits together")
     seg.add_argument("--shape", type=int, nargs=3, metavar=("X", "Y", "Z"))
     seg.add_argument("--dtype", help="voxel type of raw input (uint8, uint16, float32, ...)")
     seg.add_argument("--value-scale", type=float, metavar="S",
@@ -191,7 +193,8 @@ def _load_for_budget(input_name, args, budget, say):
     options = (args.shape, args.dtype, args.allow_external_data)
     if args.chunks is not None:
         return _load(input_name, *options, chunks=args.chunks)
-    path = Path(resolve(input_name))
+    path = resolve(input_name)       # a dataset name is verified once, here
+    input_name = str(path)
     try:
         size = path.stat().st_size if path.is_file() else 0
     except OSError:

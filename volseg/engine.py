@@ -1,15 +1,16 @@
 """Where blockwise work runs: a local `dask.distributed` cluster, an existing one, or
 Dask's threaded scheduler in this process.
 
-    with Engine(workers=2, memory_limit="12GB") as engine:     # a LocalCluster
+    with Engine("local", workers=2, memory_limit="12GB") as engine:   # a LocalCluster
         engine.compute(lazy, stage="curvature")
 
 - ``scheduler=None`` or ``"threads"`` (default): Dask's threaded scheduler in this
   process, `workers` threads (default: one per core). The compiled kernels release
   the GIL, and on one machine this is the fastest engine: on 2 cores a local
-  cluster of 2 worker processes took 2.4x as long end to end at 256^3 (75.5 s
-  against 30.9 s; the distributed scheduler's per-task work, ~7000 tasks, and the
-  halos' transfers between processes compete with the kernels for the same cores).
+  cluster of 2 worker processes took 2.5x as long end to end at 256^3 (77.9 s
+  against 31.6 s, benchmarks/bench_blockwise.py; the distributed scheduler's
+  per-task work and the halos' transfers between processes compete with the
+  kernels for the same cores).
   Memory is bounded by Dask's ordering of the blocks, not enforced.
 - ``scheduler="local"``: a `LocalCluster` of `workers` processes, one thread each,
   whose memory limits sum to `memory_limit` (default `default_memory_limit()`, half
@@ -45,6 +46,7 @@ class EngineError(ValueError):
 
 
 def physical_memory() -> int:
+    """This machine's physical memory, in bytes."""
     return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
 
 
