@@ -127,8 +127,11 @@ class Engine:
         import dask
         from distributed import Client, LocalCluster
 
-        # Its INFO lines (worker start, shutdown) are not volseg's progress.
-        logging.getLogger("distributed").setLevel(logging.WARNING)
+        # Its INFO lines (worker start, shutdown) are not volseg's progress; the
+        # caller's level is back when the engine exits.
+        logger = logging.getLogger("distributed")
+        self._stack.callback(logger.setLevel, logger.level)
+        logger.setLevel(logging.WARNING)
         if self.scheduler != "local":
             previous = dask.config.get("scheduler", None)
             try:
