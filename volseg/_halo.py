@@ -15,7 +15,12 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["with_halo"]
+__all__ = ["with_halo", "block_starts"]
+
+
+def block_starts(chunks) -> list:
+    """Per axis, the index of the first voxel of each block of a Dask array's `chunks`."""
+    return [np.concatenate([[0], np.cumsum(c)[:-1]]).astype(np.int64) for c in chunks]
 
 
 def _layer(block, end, axis):

@@ -29,14 +29,9 @@ from __future__ import annotations
 import numpy as np
 
 from . import _morse_block_kernels as kernels
-from ._halo import with_halo
+from ._halo import block_starts, with_halo
 
 __all__ = ["dask_descending_complex"]
-
-
-def _origins(chunks) -> list:
-    starts = [np.concatenate([[0], np.cumsum(c)[:-1]]) for c in chunks]
-    return starts
 
 
 def _ascend(halo, origin, shape, offsets):
@@ -210,7 +205,7 @@ def dask_descending_complex(field, connectivity="kuhn", persist=None, wrap=None,
     offsets = np.ascontiguousarray(grid_offsets(3, connectivity), dtype=np.int64)
     values = field.astype(np.float64)
     halo = with_halo(values, -np.inf)
-    starts = _origins(values.chunks)
+    starts = block_starts(values.chunks)
 
     def origin(block_id):
         return np.array([starts[d][block_id[d]] for d in range(3)], dtype=np.int64)

@@ -77,9 +77,9 @@ def dask_grid_curvature(array, entry, spacing, value_scale, boundary, wrap=None)
     axis; finiteness is checked per block). Returns a lazy float64 Dask array with the
     input's chunks. `wrap(stage, function)`, if given, wraps the per-block function
     (`volseg._resume.WorkFolder.wrap`: finished blocks kept on disk)."""
-    from .._halo import with_halo
+    from .._halo import block_starts, with_halo
 
-    starts = [np.concatenate([[0], np.cumsum(c)[:-1]]).tolist() for c in array.chunks]
+    starts = [s.tolist() for s in block_starts(array.chunks)]
     kernel = _Block(entry, spacing, value_scale, boundary, starts, array.shape)
     if wrap is not None:
         kernel = wrap("curvature", kernel)

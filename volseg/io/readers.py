@@ -309,10 +309,15 @@ def _read_npy(path: Path, shape, dtype, byte_order, allow_external, mapped=False
 # ---------------------------------------------------------------- front door
 
 
-def _check(path, data: NDArray) -> NDArray:
+def _squeezed(data: NDArray) -> NDArray:
+    """`data` without trailing axes of size 1 beyond the third (NIfTI's t = 1, ...)."""
     while data.ndim > 3 and data.shape[-1] == 1:
         data = data[..., 0]
-    return _validate.volume_array(data, source=path, error=VolumeFileError)
+    return data
+
+
+def _check(path, data: NDArray) -> NDArray:
+    return _validate.volume_array(_squeezed(data), source=path, error=VolumeFileError)
 
 
 def _lazy(path, data: NDArray, chunks):
@@ -321,8 +326,7 @@ def _lazy(path, data: NDArray, chunks):
 
     from ._files import MappedArray
 
-    while data.ndim > 3 and data.shape[-1] == 1:
-        data = data[..., 0]
+    data = _squeezed(data)
     if isinstance(data, np.memmap):
         lazy = da.from_array(MappedArray(data), chunks=chunks, asarray=True, fancy=False,
                              name=f"mapped-{path.name}-{id(data)}")
@@ -407,8 +411,8 @@ def read_volume(path, *, shape=None, dtype=None, byte_order=None,
         return read_zarr(path)   # lazy: a Dask array over the store's chunks
     regular_file_size(path)  # missing, a folder, a device or a pipe: refused before opening
     try:
-        data, frame, short, source, files = _reader(path)(path, shape, dtype, byte_order,
-                                                          allow_external_data, mapped=chunks is not None)
+        data, frame, short, source, files = _reader(path)(
+            path, shape, dtype, byte_order, allow_external_data, mapped=chunks is not None)
     except MemoryError:
         raise VolumeFileError(f"{path}: the declared size does not fit in this machine's memory") from None
     if chunks is not None:
