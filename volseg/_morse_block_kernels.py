@@ -77,74 +77,23 @@ def ascend(halo, origin, shape, offsets, result):
 
 
 @numba.njit(cache=True, nogil=True)
-def cross_pairs(halo_values, halo_cells, origin, shape, offsets, out_a, out_b, out_v, out_f):
-    """Every edge (u, w), u owned, with cell(u) < cell(w): (cell u, cell w, saddle gid,
-    saddle value), the saddle being the edge's lower end. Writes the first len(out_a)
-    and returns how many there are."""
-    a = halo_cells.shape[0] - 2
-    b = halo_cells.shape[1] - 2
-    c = halo_cells.shape[2] - 2
-    n = 0
-    for i in range(a):
-        for j in range(b):
-            for k in range(c):
-                cu = halo_cells[i + 1, j + 1, k + 1]
-                fu = halo_values[i + 1, j + 1, k + 1]
-                gu = _gid(i, j, k, origin, shape)
-                for t in range(offsets.shape[0]):
-                    di, dj, dk = offsets[t, 0], offsets[t, 1], offsets[t, 2]
-                    cw = halo_cells[i + 1 + di, j + 1 + dj, k + 1 + dk]
-                    if cw <= cu:   # the same cell, a smaller one (seen from there), outside
-                        continue
-                    fw = halo_values[i + 1 + di, j + 1 + dj, k + 1 + dk]
-                    gw = _gid(i + di, j + dj, k + dk, origin, shape)
-                    if n < len(out_a):
-                        if fu > fw or (fu == fw and gu > gw):
-                            out_v[n], out_f[n] = gw, fw
-                        else:
-                            out_v[n], out_f[n] = gu, fu
-                        out_a[n] = cu
-                        out_b[n] = cw
-                    n += 1
-    return n
-
-
-@numba.njit(cache=True, nogil=True)
-def highest_per_pair(key, order, f, v, keep):
-    """keep[i] = True for the highest (f, v) row of each run of equal key[order]:
-    `order` sorts `key`; one pass."""
-    n = len(order)
-    start = 0
-    while start < n:
-        stop = start + 1
-        best = order[start]
-        while stop < n and key[order[stop]] == key[order[start]]:
-            r = order[stop]
-            if f[r] > f[best] or (f[r] == f[best] and v[r] > v[best]):
-                best = r
-            stop += 1
-        keep[best] = True
-        start = stop
-
-
-@numba.njit(cache=True, nogil=True)
 def spanning_edges(edge_a, edge_b, order, n_cells, keep):
     """keep[e] = True for the edges of the maximum spanning forest: Kruskal from the
-    last of `order` (the highest saddle) down, over cells 0..n_cells-1. An edge left
-    out joins two cells already joined by higher edges of the same block, so it joins
-    nothing in the whole graph either: the forest of the union of the blocks' forests
-    is the whole graph's (the order is strict, so that forest is unique)."""
+    last of `order` (the highest edge) down, over cells 0..n_cells-1. An edge left
+    out closes a cycle of higher edges of the same block, so it merges nothing in the
+    whole graph either: the forest of the union of the blocks' forests is the whole
+    graph's (the order is strict, so that forest is unique)."""
     parent = np.arange(n_cells)
     for k in range(len(order) - 1, -1, -1):
         e = order[k]
-        a = edge_a[e]
-        while parent[a] != a:
-            parent[a] = parent[parent[a]]
-            a = parent[a]
-        b = edge_b[e]
-        while parent[b] != b:
-            parent[b] = parent[parent[b]]
-            b = parent[b]
-        if a != b:
-            parent[max(a, b)] = min(a, b)
+        x = edge_a[e]
+        while parent[x] != x:
+            parent[x] = parent[parent[x]]
+            x = parent[x]
+        y = edge_b[e]
+        while parent[y] != y:
+            parent[y] = parent[parent[y]]
+            y = parent[y]
+        if x != y:
+            parent[max(x, y)] = min(x, y)
             keep[e] = True

@@ -12,13 +12,14 @@
    numbered by decreasing (value, index), as in memory.
 3. Per block again: cells = maximum id of each voxel (the ascent is recomputed rather
    than kept, so no block-sized intermediate outlives its task).
-4. Per block, cells and values with a halo: every edge between two cells with its
-   lower end as saddle, reduced to the highest saddle per pair of cells and then to
-   the block's maximum spanning forest in the sweep order (the only edges that can
-   merge components: about one per cell).
-5. On the client: the highest saddle per pair over all blocks, the in-memory sort
-   (value, saddle index, pair) and the same Kruskal: the same maxima, events and
-   persistence as in memory, for any chunking (tested).
+4. Per block, cells and values with a halo: the in-memory cross-edge pass on the
+   block (every edge between two cells, seen from its smaller cell's voxel, with its
+   lower end as saddle, reduced to the highest saddle per pair of cells), then the
+   block's maximum spanning forest in the sweep order (value, saddle index, pair):
+   the only edges that can merge components, about one per cell.
+5. On the client: the union of the blocks' forests (a pair found by two blocks stays
+   twice; the lower edge closes a cycle), the in-memory sort and the same Kruskal:
+   the same maxima, events and persistence as in memory, for any chunking (tested).
 
 The returned `MorseHierarchy` holds the per-maximum data and the events in memory and
 its `cells` as a lazy Dask array; `segment` relabels block by block.
@@ -112,46 +113,33 @@ def _block_tables(summaries, layer_keys, layer_ends, maxima_sorted, maxima_ids):
 
 
 def _pairs_of_block(halo_values, halo_cells, origin, shape, offsets):
-    """Stage 4: (a, b, saddle gid, saddle value), the highest saddle per cell pair."""
-    values = np.ascontiguousarray(halo_values, dtype=np.float64)
-    cells = np.ascontiguousarray(halo_cells, dtype=np.int64)
-    room = int(np.prod([s - 2 for s in halo_cells.shape])) // 2 + 1024
-    while True:   # room for one cross edge per two voxels, rerun with exact room if short
-        out = [np.empty(room, dtype=np.int64), np.empty(room, dtype=np.int64),
-               np.empty(room, dtype=np.int64), np.empty(room, dtype=np.float64)]
-        n = kernels.cross_pairs(values, cells, np.asarray(origin, dtype=np.int64),
-                                np.asarray(shape, dtype=np.int64), offsets, *out)
-        if n <= room:
-            return _spanning(*_highest_per_pair(*(x[:n] for x in out)))
-        room = n
+    """Stage 4: (a, b, saddle gid, saddle value) of the block's edges of the cell
+    graph's maximum spanning forest: about one edge per cell.
 
-
-def _highest_per_pair(a, b, v, f):
-    """One row per (a, b): the highest (value, gid) saddle (one sort of the pair key and
-    a compiled pass; a 4-key lexsort took 11 s for the 256^3 client merge)."""
-    if not len(a):
-        return a, b, v, f
-    key = a.astype(np.int64) * (int(b.max()) + 1) + b
-    keep = np.zeros(len(a), dtype=bool)
-    kernels.highest_per_pair(key, np.argsort(key), f, v, keep)
-    return a[keep], b[keep], v[keep], f[keep]
-
-
-def _spanning(a, b, v, f):
-    """The block's edges that can ever merge two components: its maximum spanning
-    forest in the in-memory sweep order (value, saddle index, pair), about one edge per
-    cell instead of three to four (exact: `spanning_edges`)."""
+    The in-memory cross-edge pass (`morse._cross_edges`) runs on the block with its
+    halo as the padded field: the owned voxels are its vertices, the halo holds the
+    neighbours' values (-inf outside the volume). An edge is seen from its smaller
+    cell's voxel, so each edge between two blocks is found by one of them. Cells are
+    renumbered in increasing order (the pairs and ties keep the in-memory order), the
+    highest saddle per pair is sorted as in memory and `spanning_edges` keeps the
+    block's forest."""
     from . import _morse_kernels
+    from .morse import _cross_edges, _Neighbourhood, _saddle_order
 
-    if not len(a):
-        return a, b, v, f
-    cells, local = np.unique(np.concatenate([a, b]), return_inverse=True)
-    la, lb = local[:len(a)], local[len(a):]
-    order = np.argsort(f)
-    _morse_kernels.break_ties(order, f[order], v, a, b)
+    values = np.ascontiguousarray(halo_values, dtype=np.float64)
+    cells, local = np.unique(halo_cells, return_inverse=True)
+    strides = np.array([s // values.itemsize for s in values.strides], dtype=np.int64)
+    owned = np.arange(values.size).reshape(values.shape)[1:-1, 1:-1, 1:-1].ravel()
+    graph = _Neighbourhood(values.ravel(), owned, True, offsets @ strides,
+                           np.zeros(1, np.int64), np.zeros(1, np.int64), values.shape)
+    a, b, saddle = _cross_edges(_morse_kernels, graph, local.ravel(), len(cells))
+    order = _saddle_order(graph.values, saddle, a, b)
     keep = np.zeros(len(a), dtype=bool)
-    kernels.spanning_edges(la, lb, order, len(cells), keep)
-    return a[keep], b[keep], v[keep], f[keep]
+    kernels.spanning_edges(a, b, order, len(cells), keep)
+    a, b, saddle = a[keep], b[keep], saddle[keep]
+    i, j, k = np.unravel_index(saddle, values.shape)
+    gids = ((origin[0] + i - 1) * shape[1] + origin[1] + j - 1) * shape[2] + origin[2] + k - 1
+    return cells[a], cells[b], gids, graph.values[saddle]
 
 
 def _per_block(function, *arrays, **kwargs):
@@ -240,16 +228,16 @@ def dask_descending_complex(field, connectivity="kuhn", persist=None, wrap=None,
     if persist is not None:
         cells = persist(cells)
         phases.done("blocks: cells (stored)")
-    halo_cells = with_halo(cells.astype(np.int64), -1)
+    halo_cells = with_halo(cells, -1)
     pairs = _gather(_per_block(wrap("pairs", lambda h, c, block_id: _pairs_of_block(
         h, c, origin(block_id), shape, offsets)), halo, halo_cells), compute,
         "Morse: cross-cell edges and spanning forest per block")
     phases.done("blocks: cells and cross-cell edges")
-    edge_a, edge_b, edge_v, edge_f = _highest_per_pair(
-        *(np.concatenate([p[k] for p in pairs]) for k in range(4)))
+    # The union of the blocks' forests holds the whole graph's forest: Kruskal over it
+    # makes the in-memory merges (a pair found by two blocks: the lower edge is skipped).
+    edge_a, edge_b = (np.concatenate([p[k] for p in pairs]).astype(index_type) for k in (0, 1))
+    edge_v, edge_f = (np.concatenate([p[k] for p in pairs]) for k in (2, 3))
     del pairs
-    edge_a = edge_a.astype(index_type)
-    edge_b = edge_b.astype(index_type)
     order = np.argsort(edge_f)
     _morse_kernels.break_ties(order, edge_f[order], edge_v, edge_a, edge_b)
     sorted_edges = [edge_a[order], edge_b[order], edge_v[order]]

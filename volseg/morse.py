@@ -173,7 +173,8 @@ def _cross_edges(kernels, graph, cell, n_cells):
     kernels.group_by_cell(graph.vertices, cell, n_cells, starts, members)
     graph.vertices = None  # members hold every vertex now: 4 bytes per voxel less at the peak
     # Cells in the order of their first vertex, so that the walk moves through memory.
-    visit = np.argsort(members[starts[:-1]], kind="stable").astype(np.int64)
+    # (A cell may have no vertex: the blockwise pass's cells seen only in a block's halo.)
+    visit = np.argsort(members[np.minimum(starts[:-1], n_real - 1)], kind="stable").astype(np.int64)
     counts_in_order = np.diff(starts)[visit]
     n_chunks = max(1, min(256, -(-n_real // _CHUNK_VERTICES)))
     bounds = np.searchsorted(np.cumsum(counts_in_order),
