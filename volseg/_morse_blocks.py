@@ -217,7 +217,7 @@ def dask_descending_complex(field, connectivity="kuhn", persist=None, wrap=None,
     for index, table in zip(np.ndindex(grid), _block_tables(summaries, layer_keys, layer_ends,
                                                             maxima_sorted, maxima_ids), strict=True):
         tables[index] = table
-    del summaries, layer_keys, layer_ends
+    del summaries, layer_keys, layer_ends, maxima_sorted, maxima_ids
     tables = da.from_array(tables, chunks=1, name=False)
 
     def cells_of(h, table, block_id=None):
@@ -225,6 +225,7 @@ def dask_descending_complex(field, connectivity="kuhn", persist=None, wrap=None,
 
     cells = halo.map_blocks(wrap("cells", cells_of), tables, dtype=index_type,
                             chunks=values.chunks, meta=np.empty((0, 0, 0), index_type))
+    del tables     # held by the cells' graph only: `persist` may free them (about 12 B/maximum)
     if persist is not None:
         cells = persist(cells)
         phases.done("blocks: cells (stored)")
@@ -235,23 +236,40 @@ def dask_descending_complex(field, connectivity="kuhn", persist=None, wrap=None,
     phases.done("blocks: cells and cross-cell edges")
     # The union of the blocks' forests holds the whole graph's forest: Kruskal over it
     # makes the in-memory merges (a pair found by two blocks: the lower edge is skipped).
-    edge_a, edge_b = (np.concatenate([p[k] for p in pairs]).astype(index_type) for k in (0, 1))
-    edge_v, edge_f = (np.concatenate([p[k] for p in pairs]) for k in (2, 3))
-    del pairs
+    # Joined one column at a time, each block's copy dropped as it goes (the peak is one
+    # column more than the edges, not twice the edges).
+    pairs = [list(p) for p in pairs]
+    edge_a, edge_b, edge_v, edge_f = (_joined(pairs, k) for k in range(4))
+    edge_a, edge_b = edge_a.astype(index_type, copy=False), edge_b.astype(index_type, copy=False)
     order = np.argsort(edge_f)
     _morse_kernels.break_ties(order, edge_f[order], edge_v, edge_a, edge_b)
-    sorted_edges = [edge_a[order], edge_b[order], edge_v[order]]
+    edge_a = edge_a[order]      # one column at a time: one copy alive, not four
+    edge_b = edge_b[order]
+    edge_v = edge_v[order]
+    edge_f = edge_f[order]
+    del order
     n_maxima = len(maxima)
     out = [np.empty(max(n_maxima - 1, 0), dtype=t) for t in (np.int32, np.int32, np.int32, np.int64)]
-    n_events = _morse_kernels.kruskal(*sorted_edges, n_maxima, *out)
+    n_events = _morse_kernels.kruskal(edge_a, edge_b, edge_v, n_maxima, *out)
+    del edge_a, edge_b
     young, elder, target, saddle = (x[:n_events].copy() for x in out)
+    del out
     phases.done("client: saddle order, union-find")
     saddle_values = _values_at(edge_v, edge_f, saddle)
+    del edge_v, edge_f
     return MorseHierarchy(
         shape=tuple(int(s) for s in shape), cells=cells, maxima=maxima.astype(np.int64),
         values=maxima_values, young=young, elder=elder, target=target, saddle=saddle,
         saddle_value=saddle_values, mask=None, _field=field, _connectivity=connectivity,
         timings=phases.times)
+
+
+def _joined(parts, k):
+    """Column k of every block's result, concatenated; each block's copy is dropped."""
+    column = np.concatenate([p[k] for p in parts])
+    for p in parts:
+        p[k] = None
+    return column
 
 
 def _values_at(gids, values, wanted):

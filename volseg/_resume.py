@@ -54,6 +54,14 @@ class WorkFolder:
         folder.mkdir(exist_ok=True)
         return _Cached(str(folder), function)
 
+    def array(self, stage: str, chunks, dtype):
+        """A lazy Dask array of `stage`'s blocks as saved by `wrap` (each block an
+        array), read back; a block that is not on disk is an error."""
+        import dask.array as da
+
+        return da.map_blocks(_Cached(str(self.folder / stage), _not_saved), chunks=chunks,
+                             dtype=dtype, meta=np.empty((0,) * len(chunks), dtype))
+
     def remove(self):
         shutil.rmtree(self.folder, ignore_errors=True)
 
@@ -79,3 +87,7 @@ class _Cached:
         np.savez(temporary, **items)
         os.replace(temporary, path)
         return result
+
+
+def _not_saved(*blocks, block_id=None):
+    raise RuntimeError(f"block {block_id} was expected in the work folder but is not there")

@@ -102,11 +102,11 @@ def segment_to_zarr(volume, outputs, *, operator="weighted", n_regions=None, min
         start = time.perf_counter()
         say(f"{volume.name}: Morse complex, block by block")
 
-        def stored(cells):     # computed once into the work folder, read back by the
-            run(cells.map_blocks(_nothing, dtype=bool,   # edge and label passes
+        def stored(cells):     # computed once into the work folder, read back from it by
+            run(cells.map_blocks(_nothing, dtype=bool,   # the edge and label passes (so the
                                  chunks=tuple((1,) * len(c) for c in cells.chunks)),
-                stage="Morse: cells per block")
-            return cells
+                stage="Morse: cells per block")      # cells' lookup tables are freed)
+            return work.array("cells", cells.chunks, cells.dtype)
 
         hierarchy = dask_descending_complex(curvature, persist=stored, wrap=work.wrap, compute=run)
         timings["morse"] = time.perf_counter() - start
