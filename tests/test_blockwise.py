@@ -128,17 +128,49 @@ def test_segment_volume_of_a_dask_array_equals_in_memory(small):
     assert np.array_equal(lazy.curvature.compute(), eager.curvature)
     assert lazy.region_table() == eager.region_table()
     assert lazy.min_persistence == eager.min_persistence and lazy.n_regions == eager.n_regions
-    with pytest.raises(ValueError, match="without a mask or smoothing"):
+    with pytest.raises(ValueError, match="without a mask"):
         segment_volume(da.from_array(small, chunks=10), mask="nonzero")
+
+
+def test_smoothing_of_a_dask_array_equals_in_memory_bit_for_bit():
+    from volseg._smoothing import gaussian
+
+    rng = np.random.default_rng(1)
+    volume = (rng.random((23, 31, 17)) * 255).astype(np.uint8)     # rough: every voxel counts
+    for sigma in (0.7, 1.3):
+        eager = gaussian(volume, sigma)
+        # uneven chunks, chunks thinner than the filter's radius, one chunk
+        for chunks in [(7, 9, 8), (2, 31, 17), (5, 3, 17), (23, 31, 17)]:
+            lazy = gaussian(da.from_array(volume, chunks=chunks), sigma)
+            assert lazy.chunks == da.from_array(volume, chunks=chunks).chunks
+            assert np.array_equal(lazy.compute(), eager)
+    assert gaussian(volume, 0) is volume
+
+
+def test_segment_volume_of_a_dask_array_with_smoothing_equals_in_memory():
+    from volseg import segment_volume
+
+    rng = np.random.default_rng(5)
+    volume = quantized(smooth_random_field((26, 30, 21), rng, sigma=1.5), 0.1)   # 8-bit-like
+    eager = segment_volume(volume, n_regions=7, smooth=1.2)
+    lazy = segment_volume(da.from_array(volume, chunks=(9, 2, 13)), n_regions=7, smooth=1.2)
+    assert np.array_equal(lazy.curvature.compute(), eager.curvature)
+    assert np.array_equal(lazy.labels.compute(), eager.labels)
+    assert lazy.smooth == eager.smooth == 1.2 and lazy.value_scale == eager.value_scale
+    unsmoothed = segment_volume(volume, n_regions=7)
+    assert not np.array_equal(unsmoothed.curvature, eager.curvature)     # the option is used
 
 
 @pytest.mark.parametrize("chunks", [((7, 7, 9), (17,), (2, 2, 2, 3)), ((1, 22), (5, 5, 7), (9,))])
 def test_halo_equals_dask_overlap(chunks):
-    """`_halo.with_halo` (layers copied, blocks freed) gives dask's overlap, block for block."""
+    """`_halo.with_halo` (shells copied, blocks freed) gives dask's overlap, block for block,
+    with the blocks kept or recomputed, in 3-D and 2-D."""
     from volseg._halo import with_halo
 
     x = da.from_array(np.random.default_rng(0).random((23, 17, 9)), chunks=chunks)
-    for value in (-np.inf, -1.0):
-        ours, theirs = with_halo(x, value), da.overlap.overlap(x, depth=1, boundary=value)
-        assert ours.chunks == theirs.chunks
-        assert np.array_equal(ours.compute(scheduler="sync"), theirs.compute(scheduler="sync"))
+    for array in (x, x[:, :, 4]):
+        for value, fresh in ((-np.inf, False), (-1.0, True)):
+            ours = with_halo(array, value, fresh=fresh)
+            theirs = da.overlap.overlap(array, depth=1, boundary=value)
+            assert ours.chunks == theirs.chunks
+            assert np.array_equal(ours.compute(scheduler="sync"), theirs.compute(scheduler="sync"))

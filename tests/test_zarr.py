@@ -104,11 +104,25 @@ def test_cli_zarr_in_zarr_out_equals_in_memory(tmp_path, volume, capsys):
     assert zarr.open(str(tmp_path / "z" / "vol_labels.zarr"), mode="r")[:].max() == 4
 
 
+def test_cli_blockwise_smoothing_equals_in_memory(tmp_path, volume):
+    np.save(tmp_path / "vol.npy", volume)
+    common = ["--regions", "6", "--smooth", "1.5", "--mask", "none", "-q"]
+    assert main(["segment", str(tmp_path / "vol.npy"), "-o", str(tmp_path / "m"), *common]) == 0
+    assert main(["segment", str(tmp_path / "vol.npy"), "-o", str(tmp_path / "z"), "--chunks", "7",
+                 *common]) == 0
+    blockwise = zarr.open(str(tmp_path / "z" / "vol_labels.zarr"), mode="r")[:]
+    assert np.array_equal(blockwise, np.asanyarray(nibabel.load(tmp_path / "m" / "vol_labels.nii.gz").dataobj))
+    a = json.loads((tmp_path / "z" / "vol_summary.json").read_text())
+    b = json.loads((tmp_path / "m" / "vol_summary.json").read_text())
+    assert a["persistence"] == b["persistence"] and a["n_maxima"] == b["n_maxima"]
+
+
 @pytest.mark.parametrize("extra, message", [
     (["--chunks", "0"], "--chunks must be at least 2"),
     (["--chunks", "99"], "larger than the volume"),
     (["--chunks", "8", "--mask", "otsu"], "not available on the blockwise path"),
-    (["--chunks", "8", "--noise", "1"], "need the volume in memory"),
+    (["--chunks", "8", "--noise", "1"], "needs the volume in memory"),
+    (["--chunks", "8", "--smooth", "-1"], "--smooth"),
 ])
 def test_cli_blockwise_bad_arguments_exit_2_and_write_nothing(tmp_path, volume, capsys, extra,
                                                               message):

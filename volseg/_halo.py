@@ -2,16 +2,23 @@
 
 `dask.array.overlap.overlap` cuts each neighbour's faces, edges and corners as
 views of that neighbour's block: until the last block that needs one of them has
-run, the whole neighbour stays in memory. On the blockwise Morse stage that kept
-most of the volume's float64 and int64 blocks alive at once (4.3 GB at 512^3, and a
-worker of a 27-block run held more bytes than the whole volume). Here, axis by axis,
-each block's first and last layers are copied out (a layer per block, small), shifted
-by one block, and joined to the block: once its two layers are copied and its joined
-block is made, a block is free. The joined blocks are what `overlap(x, depth=1,
-boundary=value)` gives, value for value (tested through the Morse stage).
+run, the whole neighbour stays in memory (on the blockwise Morse stage that kept most
+of the volume's blocks alive at once). Here each block's outer layers are copied out
+first (its "shell": two layers per axis, a few percent of the block), and each block
+with halo is assembled in one task from the block itself and its neighbours' shells,
+right before the task that reads it. The result is what `overlap(x, depth=1,
+boundary=value)` gives, value for value (tested).
+
+With ``fresh=True`` the blocks assembled are recomputed (a clone of `x`'s graph)
+rather than kept from the shell pass: for a store-backed array this rereads a block
+when its halo is needed, so a block is in memory only while a shell is cut from it
+or while the task that reads its halo runs; without it, a block waits in memory from
+its shell's pass to its own assembly, as the scheduler orders them.
 """
 
 from __future__ import annotations
+
+import itertools
 
 import numpy as np
 
@@ -23,40 +30,61 @@ def block_starts(chunks) -> list:
     return [np.concatenate([[0], np.cumsum(c)[:-1]]).astype(np.int64) for c in chunks]
 
 
-def _layer(block, end, axis):
-    index = [slice(None)] * block.ndim
-    index[axis] = slice(end, end + 1) if end >= 0 else slice(end, None)
-    return block[tuple(index)].copy()
+def _shell(block):
+    """Copies of the block's first and last layer along each axis."""
+    layers = []
+    for axis in range(block.ndim):
+        for end in (0, -1):
+            index = [slice(None)] * block.ndim
+            index[axis] = slice(end, end + 1) if end >= 0 else slice(end, None)
+            layers.append(block[tuple(index)].copy())
+    return layers
 
 
-def _join(before, block, after, axis):
-    return np.concatenate([before, block, after], axis=axis)
+def _piece(shell, offset):
+    """The part of a neighbour's block next to a block at `offset` from it (-1: the
+    neighbour is before along that axis, so its last layer; +1: its first)."""
+    axis = next(d for d, o in enumerate(offset) if o)
+    piece = shell[2 * axis + (1 if offset[axis] < 0 else 0)]
+    index = tuple(slice(None) if o == 0 or d == axis else (slice(-1, None) if o < 0 else slice(0, 1))
+                  for d, o in enumerate(offset))
+    return piece[index]
 
 
-def _halo_axis(x, axis: int, value):
-    import dask.array as da
-
-    n = x.numblocks[axis]
-    thin = tuple((1,) * n if d == axis else c for d, c in enumerate(x.chunks))
-    first = x.map_blocks(_layer, 0, axis, chunks=thin, dtype=x.dtype)
-    last = x.map_blocks(_layer, -1, axis, chunks=thin, dtype=x.dtype)
-    fill_shape = tuple(1 if d == axis else s for d, s in enumerate(x.shape))
-    fill_chunks = tuple((1,) if d == axis else c for d, c in enumerate(x.chunks))
-    fill = da.full(fill_shape, value, dtype=x.dtype, chunks=fill_chunks)
-    cut = [slice(None)] * x.ndim
-    cut[axis] = slice(0, n)
-    before = da.concatenate([fill, last], axis=axis)[tuple(cut)]      # block k: last of k-1
-    cut[axis] = slice(1, n + 1)
-    after = da.concatenate([first, fill], axis=axis)[tuple(cut)]      # block k: first of k+1
-    grown = tuple(tuple(s + 2 for s in c) if d == axis else c for d, c in enumerate(x.chunks))
-    return da.map_blocks(_join, before, x, after, axis=axis, chunks=grown, dtype=x.dtype,
-                         meta=np.empty((0,) * x.ndim, dtype=x.dtype))
+def _assemble(block, shells, offsets, value):
+    out = np.full(tuple(s + 2 for s in block.shape), value, dtype=block.dtype)
+    out[(slice(1, -1),) * block.ndim] = block
+    for offset, shell in zip(offsets, shells, strict=True):
+        if shell is not None:
+            where = tuple(slice(0, 1) if o < 0 else slice(-1, None) if o > 0 else slice(1, -1)
+                          for o in offset)
+            out[where] = _piece(shell, offset)
+    return out
 
 
-def with_halo(x, value):
+def with_halo(x, value, fresh: bool = False):
     """`x` (a Dask array) with every block grown by one voxel on each side: its
     neighbours' voxels, and `value` outside the array (as `overlap(x, depth=1,
-    boundary=value)`)."""
-    for axis in range(x.ndim):
-        x = _halo_axis(x, axis, value)
-    return x
+    boundary=value)`). `fresh`: assemble from a recomputed copy of each block (see
+    the module docstring)."""
+    import dask.array as da
+    from dask.base import tokenize
+    from dask.graph_manipulation import clone
+    from dask.highlevelgraph import HighLevelGraph
+
+    token = tokenize(x, value, fresh)
+    shells = f"halo-shell-{token}"
+    name = f"halo-{token}"
+    own = clone(x) if fresh else x
+    grid = list(itertools.product(*(range(n) for n in x.numblocks)))
+    offsets = [o for o in itertools.product((-1, 0, 1), repeat=x.ndim) if any(o)]
+    graph = {(shells, *index): (_shell, (x.name, *index)) for index in grid}
+    for index in grid:
+        around = [tuple(i + o for i, o in zip(index, offset, strict=True)) for offset in offsets]
+        keys = [(shells, *n) if all(0 <= i < b for i, b in zip(n, x.numblocks, strict=True))
+                else None for n in around]
+        graph[(name, *index)] = (_assemble, (own.name, *index), keys, offsets, value)
+    layers = HighLevelGraph.from_collections(name, graph, dependencies=[x, own])
+    grown = tuple(tuple(s + 2 for s in c) for c in x.chunks)
+    return da.Array(layers, name, chunks=grown, dtype=x.dtype,
+                    meta=np.empty((0,) * x.ndim, dtype=x.dtype))

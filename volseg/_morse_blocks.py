@@ -164,7 +164,8 @@ def _gather(blocks, compute, stage) -> list:
     return [block.flat[0] for block in results]      # each a 1x1x1 object array
 
 
-def dask_descending_complex(field, connectivity="kuhn", persist=None, wrap=None, compute=None):
+def dask_descending_complex(field, connectivity="kuhn", persist=None, wrap=None, compute=None,
+                            reread=False):
     """`descending_complex` of a 3-D Dask array (see the module docstring).
 
     Options of the blockwise pipeline (`volseg.blockwise`): `persist` (a function
@@ -172,7 +173,9 @@ def dask_descending_complex(field, connectivity="kuhn", persist=None, wrap=None,
     back) computes the cells once instead of in every later pass (edges, labels);
     `wrap(stage, function)` wraps each per-block function (to keep finished blocks on
     disk); `compute(*collections, stage=name)` replaces `dask.compute` (to show
-    progress)."""
+    progress); `reread`: the field's blocks are cheap to make again (read from a
+    store), so each is made again for its halo rather than kept waiting for it
+    (`volseg._halo`; the stored cells are always reread)."""
     import dask
     import dask.array as da
 
@@ -192,7 +195,7 @@ def dask_descending_complex(field, connectivity="kuhn", persist=None, wrap=None,
     shape = np.array(field.shape, dtype=np.int64)
     offsets = np.ascontiguousarray(grid_offsets(3, connectivity), dtype=np.int64)
     values = field.astype(np.float64)
-    halo = with_halo(values, -np.inf)
+    halo = with_halo(values, -np.inf, fresh=reread)
     starts = block_starts(values.chunks)
 
     def origin(block_id):
@@ -229,7 +232,7 @@ def dask_descending_complex(field, connectivity="kuhn", persist=None, wrap=None,
     if persist is not None:
         cells = persist(cells)
         phases.done("blocks: cells (stored)")
-    halo_cells = with_halo(cells, -1)
+    halo_cells = with_halo(cells, -1, fresh=persist is not None)
     pairs = _gather(_per_block(wrap("pairs", lambda h, c, block_id: _pairs_of_block(
         h, c, origin(block_id), shape, offsets)), halo, halo_cells), compute,
         "Morse: cross-cell edges and spanning forest per block")

@@ -43,14 +43,17 @@ IN_MEMORY_BYTES_PER_VOXEL = 40
 
 
 def segment_to_zarr(volume, outputs, *, operator="weighted", n_regions=None, min_persistence=None,
-                    value_scale=None, boundary="linear", engine=None,
+                    value_scale=None, boundary="linear", smooth=0.0, engine=None,
                     say=lambda message: None) -> dict:
     """Segment a lazily read `volume` (its data a 3-D Dask array) into an entered
     `OutputSet` named by ``output_names(stem, blockwise=True)``; returns the summary.
+    `smooth`: Gaussian sigma in voxels, as `segment_volume`'s (computed block by block
+    in each pass that reads it: the value scale's and the curvature's).
     `engine`: a `volseg.engine.Engine` (entered), for its progress bars."""
     import dask
 
     from . import __version__, _validate
+    from ._smoothing import gaussian
     from ._resume import WorkFolder
     from .curvature import default_value_scale, get_operator
     from .curvature._grid import check_boundary
@@ -65,6 +68,8 @@ def segment_to_zarr(volume, outputs, *, operator="weighted", n_regions=None, min
     entry = get_operator(operator)
     min_persistence, n_cut, auto = _cut_request(min_persistence, n_regions)
     data = _validate.lazy_volume_array(volume.data)
+    smooth = _validate.smooth(smooth)
+    values = gaussian(data, smooth)
     spacing = volume.spacing
     frame = volume.frame or Frame.from_spacing(spacing)
     check_boundary(boundary)
@@ -80,13 +85,13 @@ def segment_to_zarr(volume, outputs, *, operator="weighted", n_regions=None, min
 
         timings = {}
         start = time.perf_counter()
-        scale = _validate.value_scale(default_value_scale(data, spacing)
+        scale = _validate.value_scale(default_value_scale(values, spacing)
                                       if value_scale is None else value_scale)
         work = WorkFolder(outputs.folder / f".{outputs.stem}.volseg-work", {
             "volseg": __version__, "input": checksum, "shape": list(data.shape),
             "chunks": [list(c) for c in data.chunks], "spacing": list(spacing),
             "operator": entry.name, "value_scale": scale, "boundary": boundary,
-            "connectivity": "kuhn", "block_layout": 2})   # 2: curvature blocks = input chunks
+            "connectivity": "kuhn", "smooth": smooth, "block_layout": 2})   # 2: curvature blocks = input chunks
         if work.resumed:
             done = {stage: work.finished(stage)
                     for stage in ("curvature", "ascent", "cells", "pairs")}
@@ -94,8 +99,8 @@ def segment_to_zarr(volume, outputs, *, operator="weighted", n_regions=None, min
                 f"({', '.join(f'{stage} {n}' for stage, n in done.items())})")
         say(f"{volume.name}: curvature ({entry.name}) of a {'x'.join(map(str, data.shape))} volume "
             f"in {chunks} blocks")
-        write_zarr(paths["curvature"], dask_grid_curvature(data, entry, spacing, scale, boundary,
-                                                           wrap=work.wrap),
+        write_zarr(paths["curvature"], dask_grid_curvature(values, entry, spacing, scale, boundary,
+                                                           wrap=work.wrap, reread=True),
                    frame=frame, compute=lambda x: run(x, stage="curvature"))
         curvature = read_zarr(paths["curvature"]).data
         timings["curvature"] = time.perf_counter() - start
@@ -108,7 +113,8 @@ def segment_to_zarr(volume, outputs, *, operator="weighted", n_regions=None, min
                 stage="Morse: cells per block")      # cells' lookup tables are freed)
             return work.array("cells", cells.chunks, cells.dtype)
 
-        hierarchy = dask_descending_complex(curvature, persist=stored, wrap=work.wrap, compute=run)
+        hierarchy = dask_descending_complex(curvature, persist=stored, wrap=work.wrap, compute=run,
+                                            reread=True)
         timings["morse"] = time.perf_counter() - start
         labels, k, threshold, cut = _cut(hierarchy, min_persistence, n_cut, auto, timings)
         start = time.perf_counter()
@@ -118,7 +124,7 @@ def segment_to_zarr(volume, outputs, *, operator="weighted", n_regions=None, min
         timings["labels"] = time.perf_counter() - start
         choice = MaskChoice(None, "none", "none", int(np.prod(data.shape)))
         seg = Segmentation(labels, curvature, hierarchy, k, entry.name, threshold, scale, spacing,
-                           timings, cut, choice, 0.0)
+                           timings, cut, choice, smooth)
         say(f"{volume.name}: {k} regions from {len(hierarchy.maxima)} maxima; writing")
         info = summary(seg, name=volume.name, source=volume.path,
                        checksum=checksum, files=volume.files, frame=frame,
@@ -129,7 +135,8 @@ def segment_to_zarr(volume, outputs, *, operator="weighted", n_regions=None, min
         info["timings_s"]["total"] = round(time.perf_counter() - started, 4)
         info["outputs"] = {kind: str(path) for kind, path in outputs.targets.items()}
         curve = (hierarchy.event_persistence, hierarchy.n_components, threshold)
-        title = f"{volume.name}: {k} regions, {entry.name.replace('_', '-')} curvature (blockwise)"
+        title = f"{volume.name}: {k} regions, {entry.name.replace('_', '-')} curvature"
+        title += f", smoothed sigma {smooth:g} (blockwise)" if smooth else " (blockwise)"
         write_preview(paths["preview"], data, curvature, labels, title=title, persistence=curve)
         if "persistence" in paths:
             write_persistence_plot(paths["persistence"], *curve, k)

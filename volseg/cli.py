@@ -278,7 +278,7 @@ def segment_to_files(volume, outputs, *, operator="weighted", n_regions=None,
 
         return segment_to_zarr(volume, outputs, operator=operator, n_regions=n_regions,
                                min_persistence=min_persistence, value_scale=value_scale,
-                               engine=engine, say=say)
+                               smooth=smooth, engine=engine, say=say)
     data = np.asarray(volume)
     if noise:
         data = add_value_noise(data, noise, seed=seed)
@@ -358,14 +358,16 @@ def _cmd_segment(args):
     # Read and check every input before writing or computing anything.
     if args.chunks is not None and args.chunks < 2:
         raise UsageError(f"--chunks must be at least 2 voxels, got {args.chunks}")
+    if not (np.isfinite(args.smooth) and args.smooth >= 0):
+        raise UsageError(f"--smooth must be a non-negative number of voxels, got {args.smooth}")
     volumes = [_load_for_budget(name, args, engine.memory_limit, say) for name in args.inputs]
     if args.chunks is not None:
         volumes = [_chunked(v, args.chunks) for v in volumes]
     mask = args.mask if args.mask_threshold is None else f"value>{args.mask_threshold!r}"
     for volume in volumes:
         if _is_lazy(volume):   # what the blockwise path cannot do, refused before it starts
-            if args.noise or args.smooth:
-                raise UsageError("--noise and --smooth need the volume in memory; drop --chunks")
+            if args.noise:
+                raise UsageError("--noise needs the volume in memory; drop --chunks")
             _blockwise_mask(volume.data, mask)
     _check_out_dir(out_dir)
     summaries = _segment_all(

@@ -9,6 +9,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from . import _validate
+from ._smoothing import gaussian
 from .curvature import default_value_scale, get_operator
 from .curvature._grid import check_boundary, checked_grid_curvature
 from .masks import MaskChoice
@@ -166,10 +167,7 @@ def segment_volume(
     choice = foreground_mask(data, mask)
     timings = {}
     start = time.perf_counter()
-    if smooth:
-        from scipy.ndimage import gaussian_filter
-
-        data = gaussian_filter(data.astype(np.float64), smooth, mode="nearest")
+    data = gaussian(data, smooth)
     value_scale = _validate.value_scale(default_value_scale(data, spacing)
                                         if value_scale is None else value_scale)
     curvature = checked_grid_curvature(data, entry, spacing, value_scale, boundary)
@@ -189,15 +187,17 @@ def _segment_dask(volume, entry, min_persistence, n_regions, auto, value_scale, 
     from .curvature import grid_curvature
     from .masks import MaskChoice
 
-    if mask not in (None, "none") or smooth:
-        raise ValueError("a Dask volume is segmented without a mask or smoothing for now; "
-                         "pass mask=None and smooth=0, or compute it (numpy)")
+    if mask not in (None, "none"):
+        raise ValueError("a Dask volume is segmented without a mask for now; "
+                         "pass mask=None, or compute it (numpy)")
+    smooth = _validate.smooth(smooth)
     data = getattr(volume, "data", volume)
     spacing = _validate.spacing(spacing, getattr(volume, "spacing", (1.0, 1.0, 1.0)))
     check_boundary(boundary)
     _validate.lazy_volume_array(data)
     timings = {}
     start = time.perf_counter()
+    data = gaussian(data, smooth)
     value_scale = _validate.value_scale(default_value_scale(data, spacing)
                                         if value_scale is None else value_scale)
     curvature = grid_curvature(data, entry.name, spacing=spacing, value_scale=value_scale,
@@ -209,7 +209,7 @@ def _segment_dask(volume, entry, min_persistence, n_regions, auto, value_scale, 
     labels, k, threshold, cut = _cut(hierarchy, min_persistence, n_regions, auto, timings)
     choice = MaskChoice(None, "none", "none", int(np.prod(data.shape)))
     return Segmentation(labels, curvature, hierarchy, k, entry.name, threshold, value_scale,
-                        spacing, timings, cut, choice, 0.0)
+                        spacing, timings, cut, choice, smooth)
 
 
 def _cut_request(min_persistence, n_regions) -> tuple:

@@ -72,16 +72,18 @@ def _pad(fp, axis: int, end: int, boundary: str):
         fp[layer(end)] = fp[layer(next_)]
 
 
-def dask_grid_curvature(array, entry, spacing, value_scale, boundary, wrap=None):
+def dask_grid_curvature(array, entry, spacing, value_scale, boundary, wrap=None, reread=False):
     """`checked_grid_curvature` for a 3-D Dask array (checked: real, 3-D, >= 2 per
     axis; finiteness is checked per block). Returns a lazy float64 Dask array with the
     input's chunks. `wrap(stage, function)`, if given, wraps the per-block function
-    (`volseg._resume.WorkFolder.wrap`: finished blocks kept on disk)."""
+    (`volseg._resume.WorkFolder.wrap`: finished blocks kept on disk). `reread`: the
+    input's blocks are cheap to make again (read from a file): each is made again for
+    its own halo (`volseg._halo`, fresh) instead of waiting in memory for it."""
     from .._halo import block_starts, with_halo
 
     starts = [s.tolist() for s in block_starts(array.chunks)]
     kernel = _Block(entry, spacing, value_scale, boundary, starts, array.shape)
     if wrap is not None:
         kernel = wrap("curvature", kernel)
-    return with_halo(array, 0).map_blocks(kernel, dtype=np.float64, chunks=array.chunks,
+    return with_halo(array, 0, fresh=reread).map_blocks(kernel, dtype=np.float64, chunks=array.chunks,
                                           meta=np.zeros((0, 0, 0)))
