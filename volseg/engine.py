@@ -34,6 +34,7 @@ from __future__ import annotations
 import contextlib
 import os
 import sys
+from concurrent.futures import ThreadPoolExecutor
 
 __all__ = ["Engine", "EngineError", "default_memory_limit", "parse_bytes"]
 
@@ -43,6 +44,12 @@ CONNECT_TIMEOUT = 10.0      # seconds to reach a running scheduler
 
 class EngineError(ValueError):
     """The Dask engine cannot be started or reached as asked."""
+
+
+def _one_numba_thread():
+    import numba
+
+    numba.set_num_threads(1)      # thread-local: this worker thread only
 
 
 def physical_memory() -> int:
@@ -105,7 +112,12 @@ class Engine:
 
         try:
             if self.threaded:
-                self._stack.enter_context(dask.config.set(scheduler="threads",
+                # Each worker thread runs numba's parallel loops on one thread: the
+                # workers are the parallelism (nested, N workers would run N x cores
+                # OpenMP threads spinning against each other), and --workers 1 is one core.
+                pool = self._stack.enter_context(
+                    ThreadPoolExecutor(self.workers, initializer=_one_numba_thread))
+                self._stack.enter_context(dask.config.set(scheduler="threads", pool=pool,
                                                           num_workers=self.workers))
             else:
                 # Rechunking by tasks: the blocks' rechunks are small, and the
