@@ -104,17 +104,21 @@ def test_cli_zarr_in_zarr_out_equals_in_memory(tmp_path, volume, capsys):
     assert zarr.open(str(tmp_path / "z" / "vol_labels.zarr"), mode="r")[:].max() == 4
 
 
-def test_cli_blockwise_smoothing_equals_in_memory(tmp_path, volume):
+@pytest.mark.parametrize("source", ["npy", "zarr"])
+def test_cli_blockwise_smoothing_equals_in_memory(tmp_path, volume, source):
     np.save(tmp_path / "vol.npy", volume)
+    write_zarr(tmp_path / "vol.zarr", volume, chunks=(9, 11, 7))
     common = ["--regions", "6", "--smooth", "1.5", "--mask", "none", "-q"]
     assert main(["segment", str(tmp_path / "vol.npy"), "-o", str(tmp_path / "m"), *common]) == 0
-    assert main(["segment", str(tmp_path / "vol.npy"), "-o", str(tmp_path / "z"), "--chunks", "7",
+    lazy = ["vol.npy", "--chunks", "7"] if source == "npy" else ["vol.zarr"]
+    assert main(["segment", str(tmp_path / lazy[0]), *lazy[1:], "-o", str(tmp_path / "z"),
                  *common]) == 0
     blockwise = zarr.open(str(tmp_path / "z" / "vol_labels.zarr"), mode="r")[:]
     assert np.array_equal(blockwise, np.asanyarray(nibabel.load(tmp_path / "m" / "vol_labels.nii.gz").dataobj))
     a = json.loads((tmp_path / "z" / "vol_summary.json").read_text())
     b = json.loads((tmp_path / "m" / "vol_summary.json").read_text())
     assert a["persistence"] == b["persistence"] and a["n_maxima"] == b["n_maxima"]
+    assert a["smooth_sigma_voxels"] == 1.5
 
 
 @pytest.mark.parametrize("extra, message", [

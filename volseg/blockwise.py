@@ -4,7 +4,8 @@
 that reads the curvature would compute it again. Here each stage reads the one
 before from disk instead: inside the output set's staging folder,
 
-1. the value scale (one pass over the volume: min and max);
+1. the value scale (one pass over the volume, after `smooth` if asked: min and max;
+   the smoothing is done again, block by block, where the curvature reads it);
 2. the curvature, block by block with its halo, written to ``<stem>_curvature.zarr``
    (float64, so that the Morse stage reads exactly what it would in memory);
 3. the Morse hierarchy from that store (`descending_complex` on Dask: three passes
@@ -99,8 +100,11 @@ def segment_to_zarr(volume, outputs, *, operator="weighted", n_regions=None, min
                 f"({', '.join(f'{stage} {n}' for stage, n in done.items())})")
         say(f"{volume.name}: curvature ({entry.name}) of a {'x'.join(map(str, data.shape))} volume "
             f"in {chunks} blocks")
+        # A smoothed input's blocks are not reread: dask (2026.8) fails to run a clone
+        # of a map_overlap graph ("Cannot fuse tasks with multiple outputs"); they wait
+        # in memory from their shells' pass to their halos', as Dask orders them.
         write_zarr(paths["curvature"], dask_grid_curvature(values, entry, spacing, scale, boundary,
-                                                           wrap=work.wrap, reread=True),
+                                                           wrap=work.wrap, reread=not smooth),
                    frame=frame, compute=lambda x: run(x, stage="curvature"))
         curvature = read_zarr(paths["curvature"]).data
         timings["curvature"] = time.perf_counter() - start

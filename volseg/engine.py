@@ -11,7 +11,9 @@ Dask's threaded scheduler in this process.
   against 31.6 s, benchmarks/bench_blockwise.py; the distributed scheduler's
   per-task work and the halos' transfers between processes compete with the
   kernels for the same cores).
-  Memory is bounded by Dask's ordering of the blocks, not enforced.
+  Each worker thread runs numba's parallel loops on one thread, so `workers` is the
+  number of cores used. Memory is bounded by Dask's ordering of the blocks, not
+  enforced.
 - ``scheduler="local"``: a `LocalCluster` of `workers` processes, one thread each,
   whose memory limits sum to `memory_limit` (default `default_memory_limit()`, half
   of this machine's RAM); Dask's worker memory manager then spills, pauses and
@@ -44,6 +46,23 @@ CONNECT_TIMEOUT = 10.0      # seconds to reach a running scheduler
 
 class EngineError(ValueError):
     """The Dask engine cannot be started or reached as asked."""
+
+
+def _return_freed_memory():
+    """Make glibc give freed memory back to the system, as dask.distributed does for
+    its workers (MALLOC_TRIM_THRESHOLD_=65536): setting the trim threshold also stops
+    glibc raising its mmap threshold after each large free, which otherwise keeps
+    the freed blocks' memory in this process (measured on one 512^3 blockwise run,
+    same code: peak RSS 2.6 GB with glibc's defaults, 1.7 GB with MALLOC_TRIM_THRESHOLD_
+    and MALLOC_MMAP_THRESHOLD_ set in the environment). No effect where there is no
+    mallopt."""
+    import ctypes
+    import ctypes.util
+
+    try:
+        ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6").mallopt(-1, 65536)  # M_TRIM_THRESHOLD
+    except (OSError, AttributeError):
+        pass
 
 
 def _one_numba_thread():
@@ -112,6 +131,7 @@ class Engine:
 
         try:
             if self.threaded:
+                _return_freed_memory()
                 # Each worker thread runs numba's parallel loops on one thread: the
                 # workers are the parallelism (nested, N workers would run N x cores
                 # OpenMP threads spinning against each other), and --workers 1 is one core.

@@ -182,8 +182,8 @@ def segment_volume(
 
 def _segment_dask(volume, entry, min_persistence, n_regions, auto, value_scale, spacing,
                   boundary, mask, smooth) -> Segmentation:
-    """`segment_volume` of a Dask array: curvature and Morse stage block by block
-    (DESIGN.md section 10), labels and curvature returned as lazy Dask arrays."""
+    """`segment_volume` of a Dask array: smoothing, curvature and Morse stage block by
+    block (DESIGN.md section 10), labels and curvature returned as lazy Dask arrays."""
     from .curvature import grid_curvature
     from .masks import MaskChoice
 
