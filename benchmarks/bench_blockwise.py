@@ -152,7 +152,8 @@ def main(argv=None) -> int:
                   "peak "
                   f"{result['peak_gb']:.2f} GB, same labels as in memory: {same}", flush=True)
     smoothed = f", smooth {args.smooth:g}" if args.smooth else ""
-    print("\n| size | path | workers | wall s | peak GB (all processes) | maxima | regions | same labels |")
+    print("\n| size | path | workers | wall s | peak GB (all processes) | maxima | regions "
+          "| same labels |")
     print("| --- | --- | --- | --- | --- | --- | --- | --- |")
     for r in rows:
         print(f"| {r['size']}^3{smoothed} | {r['path']} | {r['workers']} | {r['seconds']:.1f} | "

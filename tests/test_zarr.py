@@ -114,7 +114,8 @@ def test_cli_blockwise_smoothing_equals_in_memory(tmp_path, volume, source):
     assert main(["segment", str(tmp_path / lazy[0]), *lazy[1:], "-o", str(tmp_path / "z"),
                  *common]) == 0
     blockwise = zarr.open(str(tmp_path / "z" / "vol_labels.zarr"), mode="r")[:]
-    assert np.array_equal(blockwise, np.asanyarray(nibabel.load(tmp_path / "m" / "vol_labels.nii.gz").dataobj))
+    in_memory = nibabel.load(tmp_path / "m" / "vol_labels.nii.gz").dataobj
+    assert np.array_equal(blockwise, np.asanyarray(in_memory))
     a = json.loads((tmp_path / "z" / "vol_summary.json").read_text())
     b = json.loads((tmp_path / "m" / "vol_summary.json").read_text())
     assert a["persistence"] == b["persistence"] and a["n_maxima"] == b["n_maxima"]

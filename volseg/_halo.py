@@ -46,8 +46,8 @@ def _piece(shell, offset):
     neighbour is before along that axis, so its last layer; +1: its first)."""
     axis = next(d for d, o in enumerate(offset) if o)
     piece = shell[2 * axis + (1 if offset[axis] < 0 else 0)]
-    index = tuple(slice(None) if o == 0 or d == axis else (slice(-1, None) if o < 0 else slice(0, 1))
-                  for d, o in enumerate(offset))
+    index = tuple(slice(None) if o == 0 or d == axis
+                  else (slice(-1, None) if o < 0 else slice(0, 1)) for d, o in enumerate(offset))
     return piece[index]
 
 

@@ -54,8 +54,8 @@ def segment_to_zarr(volume, outputs, *, operator="weighted", n_regions=None, min
     import dask
 
     from . import __version__, _validate
-    from ._smoothing import gaussian
     from ._resume import WorkFolder
+    from ._smoothing import gaussian
     from .curvature import default_value_scale, get_operator
     from .curvature._grid import check_boundary
     from .curvature._grid_blocks import dask_grid_curvature
@@ -92,7 +92,8 @@ def segment_to_zarr(volume, outputs, *, operator="weighted", n_regions=None, min
             "volseg": __version__, "input": checksum, "shape": list(data.shape),
             "chunks": [list(c) for c in data.chunks], "spacing": list(spacing),
             "operator": entry.name, "value_scale": scale, "boundary": boundary,
-            "connectivity": "kuhn", "smooth": smooth, "block_layout": 2})   # 2: curvature blocks = input chunks
+            "connectivity": "kuhn", "smooth": smooth,
+            "block_layout": 2})   # 2: curvature blocks = input chunks
         if work.resumed:
             done = {stage: work.finished(stage)
                     for stage in ("curvature", "ascent", "cells", "pairs")}

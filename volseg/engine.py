@@ -60,7 +60,8 @@ def _return_freed_memory():
     import ctypes.util
 
     try:
-        ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6").mallopt(-1, 65536)  # M_TRIM_THRESHOLD
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+        libc.mallopt(-1, 65536)        # M_TRIM_THRESHOLD
     except (OSError, AttributeError):
         pass
 

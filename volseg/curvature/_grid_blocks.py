@@ -85,5 +85,5 @@ def dask_grid_curvature(array, entry, spacing, value_scale, boundary, wrap=None,
     kernel = _Block(entry, spacing, value_scale, boundary, starts, array.shape)
     if wrap is not None:
         kernel = wrap("curvature", kernel)
-    return with_halo(array, 0, fresh=reread).map_blocks(kernel, dtype=np.float64, chunks=array.chunks,
-                                          meta=np.zeros((0, 0, 0)))
+    return with_halo(array, 0, fresh=reread).map_blocks(
+        kernel, dtype=np.float64, chunks=array.chunks, meta=np.zeros((0, 0, 0)))
