@@ -74,26 +74,3 @@ def ascend(halo, origin, shape, offsets, result):
         i, r = divmod(v, b * c)
         j, k = divmod(r, c)
         result[i, j, k] = final[v]
-
-
-@numba.njit(cache=True, nogil=True)
-def spanning_edges(edge_a, edge_b, order, n_cells, keep):
-    """keep[e] = True for the edges of the maximum spanning forest: Kruskal from the
-    last of `order` (the highest edge) down, over cells 0..n_cells-1. An edge left
-    out closes a cycle of higher edges of the same block, so it merges nothing in the
-    whole graph either: the forest of the union of the blocks' forests is the whole
-    graph's (the order is strict, so that forest is unique)."""
-    parent = np.arange(n_cells)
-    for k in range(len(order) - 1, -1, -1):
-        e = order[k]
-        x = edge_a[e]
-        while parent[x] != x:
-            parent[x] = parent[parent[x]]
-            x = parent[x]
-        y = edge_b[e]
-        while parent[y] != y:
-            parent[y] = parent[parent[y]]
-            y = parent[y]
-        if x != y:
-            parent[max(x, y)] = min(x, y)
-            keep[e] = True

@@ -133,9 +133,9 @@ def _pairs_of_block(halo_values, halo_cells, origin, shape, offsets):
     graph = _Neighbourhood(values.ravel(), owned, True, offsets @ strides,
                            np.zeros(1, np.int64), np.zeros(1, np.int64), values.shape)
     a, b, saddle = _cross_edges(_morse_kernels, graph, local.ravel(), len(cells))
-    order = _saddle_order(graph.values, saddle, a, b)
+    order = _saddle_order(graph.values[saddle], saddle, a, b)
     keep = np.zeros(len(a), dtype=bool)
-    kernels.spanning_edges(a, b, order, len(cells), keep)
+    _morse_kernels.spanning_edges(a, b, order, len(cells), keep)
     a, b, saddle = a[keep], b[keep], saddle[keep]
     i, j, k = np.unravel_index(saddle, values.shape)
     gids = ((origin[0] + i - 1) * shape[1] + origin[1] + j - 1) * shape[2] + origin[2] + k - 1
@@ -180,7 +180,7 @@ def dask_descending_complex(field, connectivity="kuhn", persist=None, wrap=None,
     import dask.array as da
 
     from . import _morse_kernels
-    from .morse import MorseHierarchy, _Phases, grid_offsets
+    from .morse import MorseHierarchy, _Phases, _saddle_order, grid_offsets
 
     wrap = wrap or (lambda stage, function: function)
     compute = compute or (lambda *collections, stage: dask.compute(*collections))
@@ -244,8 +244,7 @@ def dask_descending_complex(field, connectivity="kuhn", persist=None, wrap=None,
     pairs = [list(p) for p in pairs]
     edge_a, edge_b, edge_v, edge_f = (_joined(pairs, k) for k in range(4))
     edge_a, edge_b = edge_a.astype(index_type, copy=False), edge_b.astype(index_type, copy=False)
-    order = np.argsort(edge_f)
-    _morse_kernels.break_ties(order, edge_f[order], edge_v, edge_a, edge_b)
+    order = _saddle_order(edge_f, edge_v, edge_a, edge_b)
     edge_a = edge_a[order]      # one column at a time: one copy alive, not four
     edge_b = edge_b[order]
     edge_v = edge_v[order]

@@ -76,6 +76,24 @@ def find_root(parent, x):
     return x
 
 
+@numba.njit(cache=True, nogil=True)
+def spanning_edges(edge_a, edge_b, order, n_cells, keep):
+    """The blockwise build's per-block forest (`_morse_blocks._pairs_of_block`):
+    keep[e] = True for the edges of the maximum spanning forest, Kruskal from the
+    last of `order` (the highest edge) down, over cells 0..n_cells-1. An edge left
+    out closes a cycle of higher edges of the same block, so it merges nothing in the
+    whole graph either: the forest of the union of the blocks' forests is the whole
+    graph's (the order is strict, so that forest is unique)."""
+    parent = np.arange(n_cells)
+    for k in range(len(order) - 1, -1, -1):
+        e = order[k]
+        x = find_root(parent, edge_a[e])
+        y = find_root(parent, edge_b[e])
+        if x != y:
+            parent[max(x, y)] = min(x, y)
+            keep[e] = True
+
+
 @numba.njit(cache=True, parallel=True)
 def gather(order, edge_a, edge_b, edge_v, out_a, out_b, out_v):
     """out_*[i] = edge_*[order[i]]: the edges in sweep order, in parallel, so that the

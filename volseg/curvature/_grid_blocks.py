@@ -2,7 +2,7 @@
 
 Every voxel's curvature depends on its 1-ring only (the faces through it and the
 tetrahedra on both sides of each lie within one step). So each block of the input
-gets a 1-voxel halo of its neighbours' raw values (`volseg._halo`: copied layers, so
+gets a 1-voxel halo of its neighbours' raw values (`volseg._halo`: their shells, so
 no block stays in memory for its neighbours' sake, and in the input's own type: 1
 byte per voxel for uint8), and then, inside its task: scaled, padded where it meets
 the volume's boundary exactly as the in-memory path pads the whole volume (axis by
