@@ -8,7 +8,7 @@ import dask.array as da
 import numpy as np
 import pytest
 
-from volseg import descending_complex, grid_curvature
+from volseg import descending_complex, grid_curvature, segment_volume
 
 from .conftest import smooth_random_field
 
@@ -105,10 +105,45 @@ def test_blockwise_pipeline_dask_curvature_into_dask_morse(small):
     assert_same_hierarchy(lazy, eager)
 
 
+@pytest.mark.parametrize("kind", ["smooth", "ties"])
+def test_blockwise_morse_with_a_mask_equals_in_memory(small, kind):
+    # DESIGN.md section 9 on blocks: a mask of several components (a lone voxel, a
+    # slab, blobs), chunks that cut through them, values outside the mask NaN (ignored).
+    field = small if kind == "smooth" else quantized(small)
+    rng = np.random.default_rng(11)
+    mask = smooth_random_field(small.shape, rng, sigma=2.0) > 0.1
+    mask[3, 3, 3], mask[2:4, 2:4, 2:5] = True, False
+    mask[3, 3, 3], mask[20:22] = True, True
+    field = np.where(mask, field, np.nan)
+    eager = descending_complex(field, mask=mask)
+    assert eager.n_components > 2
+    for chunks, mask_chunks in [((17, 36, 10), (5, 5, 5)), ((2, 36, 23), (31, 36, 23)),
+                                ((7, 9, 8), (7, 9, 8))]:
+        lazy = descending_complex(da.from_array(field, chunks=chunks),
+                                  mask=da.from_array(mask, chunks=mask_chunks))
+        assert_same_hierarchy(lazy, eager)
+        for cut in ({"n_regions": eager.n_components + 9}, {"min_persistence": 0.05}):
+            labels = lazy.segment(**cut).compute()
+            assert np.array_equal(labels, eager.segment(**cut))
+            assert (labels[~mask] == 0).all() and (labels[mask] > 0).all()
+    # a numpy mask works too, and an all-outside block (chunks of 2 along x) is fine
+    lazy = descending_complex(da.from_array(field, chunks=(2, 36, 23)), mask=mask)
+    assert_same_hierarchy(lazy, eager)
+
+
+def test_blockwise_morse_refuses_a_bad_mask(small):
+    lazy = da.from_array(small, chunks=10)
+    with pytest.raises(ValueError, match="boolean array of the field's shape"):
+        descending_complex(lazy, mask=np.ones((3, 3, 3), bool))
+    with pytest.raises(ValueError, match="selects no vertex"):
+        descending_complex(lazy, mask=np.zeros(small.shape, bool))
+    bad = small.copy()
+    bad[4, 4, 4] = np.inf
+    with pytest.raises(ValueError, match="inside the mask"):
+        descending_complex(da.from_array(bad, chunks=10), mask=np.ones(small.shape, bool))
+
+
 def test_blockwise_morse_refuses_what_it_cannot_do(volume):
-    lazy = da.from_array(volume, chunks=20)
-    with pytest.raises(ValueError, match="without a mask"):
-        descending_complex(lazy, mask=np.ones(volume.shape, bool))
     with pytest.raises(ValueError, match="3-D"):
         descending_complex(da.zeros((5, 5), chunks=2))
     for value in (np.inf, -np.inf, np.nan):
@@ -119,8 +154,6 @@ def test_blockwise_morse_refuses_what_it_cannot_do(volume):
 
 
 def test_segment_volume_of_a_dask_array_equals_in_memory(small):
-    from volseg import segment_volume
-
     eager = segment_volume(small, n_regions=9)
     lazy = segment_volume(da.from_array(small, chunks=(11, 17, 9)), n_regions=9)
     assert isinstance(lazy.labels, da.Array) and isinstance(lazy.curvature, da.Array)
@@ -128,8 +161,21 @@ def test_segment_volume_of_a_dask_array_equals_in_memory(small):
     assert np.array_equal(lazy.curvature.compute(), eager.curvature)
     assert lazy.region_table() == eager.region_table()
     assert lazy.min_persistence == eager.min_persistence and lazy.n_regions == eager.n_regions
-    with pytest.raises(ValueError, match="without a mask"):
-        segment_volume(da.from_array(small, chunks=10), mask="nonzero")
+
+
+@pytest.mark.parametrize("rule", ["auto", "otsu", "value>=0.2", "nonzero"])
+def test_segment_volume_of_a_dask_array_with_a_mask_equals_in_memory(small, rule):
+    # An empty background as fuel's (most voxels exactly at the minimum): auto masks it.
+    volume = np.round(np.clip(small - 0.02, 0, None) * 400).astype(np.uint8)
+    assert (volume == 0).mean() > 0.5
+    eager = segment_volume(volume, n_regions=24, mask=rule)   # more than the components
+    lazy = segment_volume(da.from_array(volume, chunks=(11, 17, 9)), n_regions=24, mask=rule)
+    assert eager.n_regions == 24
+    assert lazy.mask.describe() == eager.mask.describe()
+    assert eager.mask.used != "none"
+    assert np.array_equal(lazy.mask.mask.compute(), eager.mask.mask)
+    assert np.array_equal(lazy.labels.compute(), eager.labels)
+    assert lazy.region_table() == eager.region_table()
 
 
 def test_smoothing_of_a_dask_array_equals_in_memory_bit_for_bit():
@@ -174,3 +220,27 @@ def test_halo_equals_dask_overlap(chunks):
             theirs = da.overlap.overlap(array, depth=1, boundary=value)
             assert ours.chunks == theirs.chunks
             assert np.array_equal(ours.compute(scheduler="sync"), theirs.compute(scheduler="sync"))
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.int16, np.float32, np.float64])
+def test_mask_rules_of_a_dask_volume_equal_in_memory(dtype):
+    from volseg.masks import foreground_mask
+
+    rng = np.random.default_rng(5)
+    volume = (rng.gamma(2.0, 30.0, (23, 31, 17)) - (50 if dtype == np.int16 else 0)).astype(dtype)
+    volume[:, :20] = volume.min()                  # a plateau over half the volume: auto masks
+    lazy = da.from_array(volume, chunks=(7, 16, 5))
+    for rule in ("auto", "otsu", "nonzero", "value>40", "value<=3", "none", volume > 60):
+        eager = foreground_mask(volume, rule)
+        got = foreground_mask(lazy, rule)
+        assert got.describe() == eager.describe(), rule
+        if eager.mask is None:
+            assert got.mask is None
+        else:
+            assert isinstance(got.mask, da.Array)
+            assert np.array_equal(got.mask.compute(), eager.mask)
+    assert foreground_mask(lazy, "auto").used == "nonzero"
+    with pytest.raises(ValueError, match="selects no voxel"):
+        foreground_mask(lazy, "value>1e9")
+    with pytest.raises(ValueError, match="boolean array"):
+        foreground_mask(lazy, da.ones((3, 3, 3), dtype=bool))

@@ -125,7 +125,8 @@ def test_cli_blockwise_smoothing_equals_in_memory(tmp_path, volume, source):
 @pytest.mark.parametrize("extra, message", [
     (["--chunks", "0"], "--chunks must be at least 2"),
     (["--chunks", "99"], "larger than the volume"),
-    (["--chunks", "8", "--mask", "otsu"], "not available on the blockwise path"),
+    (["--chunks", "8", "--mask", "bright"], "unknown `mask` rule 'bright'"),
+    (["--chunks", "8", "--mask-threshold", "1000", "-q"], "selects no voxel"),
     (["--chunks", "8", "--noise", "1"], "needs the volume in memory"),
     (["--chunks", "8", "--smooth", "-1"], "--smooth"),
 ])
@@ -139,12 +140,28 @@ def test_cli_blockwise_bad_arguments_exit_2_and_write_nothing(tmp_path, volume, 
     assert not out.exists() or not [p for p in os.listdir(out) if not p.startswith(".")]
 
 
-def test_cli_blockwise_refuses_auto_mask_on_a_plateau_and_a_corrupt_chunk(tmp_path, volume, capsys):
+@pytest.mark.parametrize("mask", [[], ["--mask", "otsu"], ["--mask-threshold", "140"]])
+def test_cli_blockwise_masks_equal_in_memory(tmp_path, volume, mask):
+    # An empty background over most of the volume (fuel's case): --mask auto, the
+    # default, masks it on the blockwise path as in memory.
     empty = volume.copy()
     empty[:, :, :12] = 0
-    write_zarr(tmp_path / "empty.zarr", empty, chunks=(8, 8, 8))
-    assert main(["segment", str(tmp_path / "empty.zarr"), "-o", str(tmp_path / "o")]) == 2
-    assert "--mask none" in capsys.readouterr().err
+    write_zarr(tmp_path / "empty.zarr", empty, chunks=(8, 7, 8))
+    np.save(tmp_path / "empty.npy", empty)
+    common = ["--regions", "5", "-q", *mask]
+    assert main(["segment", str(tmp_path / "empty.zarr"), "-o", str(tmp_path / "z"), *common]) == 0
+    assert main(["segment", str(tmp_path / "empty.npy"), "-o", str(tmp_path / "m"), *common]) == 0
+    blockwise = zarr.open(str(tmp_path / "z" / "empty_labels.zarr"), mode="r")[:]
+    in_memory = np.asanyarray(nibabel.load(tmp_path / "m" / "empty_labels.nii.gz").dataobj)
+    assert np.array_equal(blockwise, in_memory)
+    assert (blockwise == 0).sum() >= (empty == 0).sum()         # the background is label 0
+    a = json.loads((tmp_path / "z" / "empty_summary.json").read_text())
+    b = json.loads((tmp_path / "m" / "empty_summary.json").read_text())
+    assert a["mask"] == b["mask"] and a["mask"]["used"] != "none"
+    assert a["regions"] == b["regions"] and a["persistence"] == b["persistence"]
+
+
+def test_cli_blockwise_refuses_a_corrupt_chunk(tmp_path, volume, capsys):
     write_zarr(tmp_path / "bad.zarr", volume, chunks=(8, 8, 8))
     sorted(p for p in (tmp_path / "bad.zarr" / "c").rglob("*") if p.is_file())[2].write_bytes(b"x")
     assert main(["segment", str(tmp_path / "bad.zarr"), "-o", str(tmp_path / "o2"), "--mask",

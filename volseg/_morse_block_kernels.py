@@ -4,7 +4,8 @@
 Voxels are named by their global flat index (C order) ``gid``; "higher" is the
 in-memory order, (f(u), gid u) > (f(v), gid v), so every decision a block takes is
 the one the in-memory build takes. The halo holds the neighbours' values (-inf
-outside the volume).
+outside the volume); a block's own -inf voxels are outside a mask (DESIGN.md
+section 9): no path enters them and they reach no maximum (`OUTSIDE`).
 """
 
 import numba
@@ -13,6 +14,8 @@ import numpy as np
 #: `ascend`'s result for a voxel whose steepest path leaves the block: -1 - gid of the
 #: first voxel outside (always on a neighbouring block's outer layer).
 EXIT = -1
+#: `ascend`'s result for an owned voxel outside the mask (value -inf).
+OUTSIDE = np.iinfo(np.int64).min
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -23,7 +26,8 @@ def _gid(i, j, k, origin, shape):
 @numba.njit(cache=True, nogil=True)
 def ascend(halo, origin, shape, offsets, result):
     """result[i, j, k] for each owned voxel: the gid of the maximum its steepest ascent
-    reaches inside the block, or -1 - gid of the first voxel outside the block on it.
+    reaches inside the block, or -1 - gid of the first voxel outside the block on it,
+    or `OUTSIDE` for a voxel of value -inf (outside the mask).
 
     halo: (a+2, b+2, c+2) float64; origin: global index of owned voxel (0, 0, 0);
     shape: the volume's shape; offsets: (m, 3) neighbour steps; result: (a, b, c) int64.
@@ -34,7 +38,11 @@ def ascend(halo, origin, shape, offsets, result):
     for i in range(a):
         for j in range(b):
             for k in range(c):
+                own = (i * b + j) * c + k
                 best_v = halo[i + 1, j + 1, k + 1]
+                if best_v == -np.inf:     # outside the mask: its own "maximum", no one
+                    up[own] = own         # climbs to it (relabelled OUTSIDE below)
+                    continue
                 best_g = _gid(i, j, k, origin, shape)
                 bi, bj, bk = i, j, k
                 for t in range(offsets.shape[0]):
@@ -45,7 +53,6 @@ def ascend(halo, origin, shape, offsets, result):
                     g = _gid(i + di, j + dj, k + dk, origin, shape)
                     if value > best_v or (value == best_v and g > best_g):
                         best_v, best_g, bi, bj, bk = value, g, i + di, j + dj, k + dk
-                own = (i * b + j) * c + k
                 if 0 <= bi < a and 0 <= bj < b and 0 <= bk < c:
                     up[own] = (bi * b + bj) * c + bk
                 else:
@@ -73,4 +80,4 @@ def ascend(halo, origin, shape, offsets, result):
     for v in range(n):
         i, r = divmod(v, b * c)
         j, k = divmod(r, c)
-        result[i, j, k] = final[v]
+        result[i, j, k] = OUTSIDE if halo[i + 1, j + 1, k + 1] == -np.inf else final[v]

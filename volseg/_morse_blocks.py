@@ -35,12 +35,14 @@ from ._halo import block_starts, with_halo
 __all__ = ["dask_descending_complex"]
 
 
-def _ascend(halo, origin, shape, offsets):
+def _ascend(halo, origin, shape, offsets, masked):
     result = np.empty(tuple(s - 2 for s in halo.shape), dtype=np.int64)
     values = np.ascontiguousarray(halo, dtype=np.float64)
     # The halo's -inf marks outside the volume; the block's own voxels must be finite
-    # (the neighbours' are checked by their own blocks).
-    if not np.isfinite(values[1:-1, 1:-1, 1:-1]).all():
+    # (the neighbours' are checked by their own blocks), or -inf outside a mask
+    # (`_masked`, which checked the values inside it).
+    inner = values[1:-1, 1:-1, 1:-1]
+    if not (np.isfinite(inner) | (masked & (inner == -np.inf))).all():
         raise ValueError("`field` holds NaN or infinite values")
     kernels.ascend(values, np.asarray(origin, dtype=np.int64), np.asarray(shape, dtype=np.int64),
                    offsets, result)
@@ -58,9 +60,19 @@ def _outer_layer(block):
     return np.flatnonzero(mask)
 
 
-def _summary_of_block(halo, origin, shape, offsets):
-    """Stage 1: (maxima gids, their values, outer-layer gids, their path ends)."""
-    result, values = _ascend(halo, origin, shape, offsets)
+def _masked(field, mask):
+    """The field inside the mask, -inf outside it (DESIGN.md section 9: no edge has an
+    end outside); NaN or infinite values inside the mask are refused."""
+    values = np.asarray(field, dtype=np.float64)
+    if not np.isfinite(values[mask]).all():
+        raise ValueError("`field` holds NaN or infinite values inside the mask")
+    return np.where(mask, values, -np.inf)
+
+
+def _summary_of_block(halo, origin, shape, offsets, masked):
+    """Stage 1: (maxima gids, their values, outer-layer gids, their path ends); the
+    outer layer's voxels outside the mask are left out (no path reaches them)."""
+    result, values = _ascend(halo, origin, shape, offsets, masked)
     a, b, c = result.shape
     local = np.arange(result.size).reshape(result.shape)
     gids = ((origin[0] + local // (b * c)) * shape[1] + origin[1] + (local // c) % b) * shape[2] \
@@ -69,6 +81,7 @@ def _summary_of_block(halo, origin, shape, offsets):
     is_max = flat == gids.ravel()
     inner = values[1:-1, 1:-1, 1:-1].ravel()
     layer = _outer_layer(result)
+    layer = layer[flat[layer] != kernels.OUTSIDE]
     return (gids.ravel()[is_max], inner[is_max], gids.ravel()[layer], flat[layer])
 
 
@@ -85,14 +98,18 @@ def _resolve(keys, ends):
     raise RuntimeError("blockwise Morse: path ends did not resolve (a bug)")
 
 
-def _cells_of_block(halo, origin, shape, offsets, keys, ids):
+def _cells_of_block(halo, origin, shape, offsets, masked, keys, ids):
     """Stage 3: the maximum id of every owned voxel, from the block's own table
-    (`_block_tables`)."""
-    result, _ = _ascend(halo, origin, shape, offsets)
+    (`_block_tables`); -1 outside the mask."""
+    result, _ = _ascend(halo, origin, shape, offsets, masked)
     # A block reaches few distinct ends: look those up, not every voxel.
     ends, inverse = np.unique(result.ravel(), return_inverse=True)
+    inside = ends != kernels.OUTSIDE             # (the smallest end, if any)
+    ends = ends[inside]
     ends[ends < 0] = -1 - ends[ends < 0]         # an exit: the neighbour's voxel it enters
-    return ids[np.searchsorted(keys, ends)][inverse].reshape(result.shape)
+    found = np.full(len(inside), -1, dtype=ids.dtype)
+    found[inside] = ids[np.searchsorted(keys, ends)]
+    return found[inverse].reshape(result.shape)
 
 
 def _block_tables(summaries, layer_keys, layer_ends, maxima_sorted, maxima_ids):
@@ -117,12 +134,12 @@ def _pairs_of_block(halo_values, halo_cells, origin, shape, offsets):
     graph's maximum spanning forest: about one edge per cell.
 
     The in-memory cross-edge pass (`morse._cross_edges`) runs on the block with its
-    halo as the padded field: the owned voxels are its vertices, the halo holds the
-    neighbours' values (-inf outside the volume). An edge is seen from its smaller
-    cell's voxel, so each edge between two blocks is found by one of them. Cells are
-    renumbered in increasing order (the pairs and ties keep the in-memory order), the
-    highest saddle per pair is sorted as in memory and `spanning_edges` keeps the
-    block's forest."""
+    halo as the padded field: the owned voxels in the mask are its vertices, the halo
+    holds the neighbours' values (-inf outside the volume and the mask). An edge is
+    seen from its smaller cell's voxel, so each edge between two blocks is found by
+    one of them. Cells are renumbered in increasing order (the pairs and ties keep the
+    in-memory order), the highest saddle per pair is sorted as in memory and
+    `spanning_edges` keeps the block's forest."""
     from . import _morse_kernels
     from .morse import _cross_edges, _Neighbourhood, _saddle_order
 
@@ -130,6 +147,10 @@ def _pairs_of_block(halo_values, halo_cells, origin, shape, offsets):
     cells, local = np.unique(halo_cells, return_inverse=True)
     strides = np.array([s // values.itemsize for s in values.strides], dtype=np.int64)
     owned = np.arange(values.size).reshape(values.shape)[1:-1, 1:-1, 1:-1].ravel()
+    owned = owned[values.ravel()[owned] > -np.inf]         # the block's voxels in the mask
+    if not len(owned):
+        nothing = np.zeros(0, dtype=np.int64)
+        return nothing, nothing, nothing, np.zeros(0)
     graph = _Neighbourhood(values.ravel(), owned, True, offsets @ strides,
                            np.zeros(1, np.int64), np.zeros(1, np.int64), values.shape)
     a, b, saddle = _cross_edges(_morse_kernels, graph, local.ravel(), len(cells))
@@ -164,9 +185,13 @@ def _gather(blocks, compute, stage) -> list:
     return [block.flat[0] for block in results]      # each a 1x1x1 object array
 
 
-def dask_descending_complex(field, connectivity="kuhn", persist=None, wrap=None, compute=None,
-                            reread=False):
+def dask_descending_complex(field, connectivity="kuhn", mask=None, persist=None, wrap=None,
+                            compute=None, reread=False):
     """`descending_complex` of a 3-D Dask array (see the module docstring).
+
+    `mask`: a boolean array (numpy or Dask) of the field's shape, as in memory
+    (DESIGN.md section 9): the blocks see -inf outside it, so no edge leaves it;
+    cells are -1 there and cuts label it 0.
 
     Options of the blockwise pipeline (`volseg.blockwise`): `persist` (a function
     taking the lazy cells and returning them stored, e.g. written to Zarr and read
@@ -195,6 +220,14 @@ def dask_descending_complex(field, connectivity="kuhn", persist=None, wrap=None,
     shape = np.array(field.shape, dtype=np.int64)
     offsets = np.ascontiguousarray(grid_offsets(3, connectivity), dtype=np.int64)
     values = field.astype(np.float64)
+    masked = mask is not None
+    if masked:
+        mask = da.asarray(mask)
+        if mask.dtype != bool or mask.shape != field.shape:
+            raise ValueError(f"`mask` must be a boolean array of the field's shape {field.shape}, "
+                             f"got {mask.dtype} {mask.shape}")
+        mask = mask.rechunk(field.chunks)
+        values = da.map_blocks(_masked, values, mask, dtype=np.float64)
     halo = with_halo(values, -np.inf, fresh=reread)
     starts = block_starts(values.chunks)
 
@@ -202,9 +235,12 @@ def dask_descending_complex(field, connectivity="kuhn", persist=None, wrap=None,
         return np.array([starts[d][block_id[d]] for d in range(3)], dtype=np.int64)
 
     summaries = _gather(_per_block(wrap("ascent", lambda h, block_id: _summary_of_block(
-        h, origin(block_id), shape, offsets)), halo), compute, "Morse: steepest ascent per block")
+        h, origin(block_id), shape, offsets, masked)), halo), compute,
+        "Morse: steepest ascent per block")
     phases.done("blocks: steepest ascent, path compression")
     maxima = np.concatenate([s[0] for s in summaries])
+    if not len(maxima):
+        raise ValueError("`mask` selects no vertex")
     maxima_values = np.concatenate([s[1] for s in summaries])
     layer_keys, layer_ends = _resolve(np.concatenate([s[2] for s in summaries]),
                                       np.concatenate([s[3] for s in summaries]))
@@ -224,7 +260,7 @@ def dask_descending_complex(field, connectivity="kuhn", persist=None, wrap=None,
     tables = da.from_array(tables, chunks=1, name=False)
 
     def cells_of(h, table, block_id=None):
-        return _cells_of_block(h, origin(block_id), shape, offsets, *table.flat[0])
+        return _cells_of_block(h, origin(block_id), shape, offsets, masked, *table.flat[0])
 
     cells = halo.map_blocks(wrap("cells", cells_of), tables, dtype=index_type,
                             chunks=values.chunks, meta=np.empty((0, 0, 0), index_type))
@@ -262,7 +298,7 @@ def dask_descending_complex(field, connectivity="kuhn", persist=None, wrap=None,
     return MorseHierarchy(
         shape=tuple(int(s) for s in shape), cells=cells, maxima=maxima.astype(np.int64),
         values=maxima_values, young=young, elder=elder, target=target, saddle=saddle,
-        saddle_value=saddle_values, mask=None, _field=field, _connectivity=connectivity,
+        saddle_value=saddle_values, mask=mask, _field=field, _connectivity=connectivity,
         timings=phases.times)
 
 

@@ -4,6 +4,8 @@
 that reads the curvature would compute it again. Here each stage reads the one
 before from disk instead: inside the output set's staging folder,
 
+0. the mask, if asked (`volseg.masks.foreground_mask` of the lazy input: a pass or
+   two for its rule and its count; each Morse pass reads it again from the input);
 1. the value scale (one pass over the volume, after `smooth` if asked: min and max;
    the smoothing is done again, block by block, where the curvature reads it);
 2. the curvature, block by block with its halo, written to ``<stem>_curvature.zarr``
@@ -44,10 +46,13 @@ IN_MEMORY_BYTES_PER_VOXEL = 40
 
 
 def segment_to_zarr(volume, outputs, *, operator="weighted", n_regions=None, min_persistence=None,
-                    value_scale=None, boundary="linear", smooth=0.0, engine=None,
+                    value_scale=None, boundary="linear", mask=None, smooth=0.0, engine=None,
                     say=lambda message: None) -> dict:
     """Segment a lazily read `volume` (its data a 3-D Dask array) into an entered
     `OutputSet` named by ``output_names(stem, blockwise=True)``; returns the summary.
+    `mask`: a `volseg.masks.foreground_mask` rule, resolved before anything is written
+    (its passes over the input: the minimum and the count, or the histogram), its
+    array read again from the input by each Morse pass.
     `smooth`: Gaussian sigma in voxels, as `segment_volume`'s (computed block by block
     in each pass that reads it: the value scale's and the curvature's).
     `engine`: a `volseg.engine.Engine` (entered), for its progress bars."""
@@ -60,7 +65,7 @@ def segment_to_zarr(volume, outputs, *, operator="weighted", n_regions=None, min
     from .curvature._grid import check_boundary
     from .curvature._grid_blocks import dask_grid_curvature
     from .io import Frame, read_zarr, write_zarr
-    from .masks import MaskChoice
+    from .masks import foreground_mask
     from .outputs import files_sha256, summary
     from .preview import write_persistence_plot, write_preview
     from .segment import Segmentation, _cut, _cut_request
@@ -78,6 +83,9 @@ def segment_to_zarr(volume, outputs, *, operator="weighted", n_regions=None, min
     run = engine.compute if engine is not None else (
         lambda *collections, stage: dask.compute(*collections))
     checksum = files_sha256(volume.files)
+    if mask not in (None, "none"):
+        say(f"{volume.name}: mask {mask}")
+    choice = foreground_mask(data, mask)     # of the values as read, as in memory
     result = {}
 
     def write(paths):
@@ -92,7 +100,7 @@ def segment_to_zarr(volume, outputs, *, operator="weighted", n_regions=None, min
             "volseg": __version__, "input": checksum, "shape": list(data.shape),
             "chunks": [list(c) for c in data.chunks], "spacing": list(spacing),
             "operator": entry.name, "value_scale": scale, "boundary": boundary,
-            "connectivity": "kuhn", "smooth": smooth,
+            "connectivity": "kuhn", "smooth": smooth, "mask": choice.used,
             "block_layout": 2})   # 2: curvature blocks = input chunks
         if work.resumed:
             done = {stage: work.finished(stage)
@@ -118,8 +126,8 @@ def segment_to_zarr(volume, outputs, *, operator="weighted", n_regions=None, min
                 stage="Morse: cells per block")      # cells' lookup tables are freed)
             return work.array("cells", cells.chunks, cells.dtype)
 
-        hierarchy = dask_descending_complex(curvature, persist=stored, wrap=work.wrap, compute=run,
-                                            reread=True)
+        hierarchy = dask_descending_complex(curvature, mask=choice.mask, persist=stored,
+                                            wrap=work.wrap, compute=run, reread=True)
         timings["morse"] = time.perf_counter() - start
         labels, k, threshold, cut = _cut(hierarchy, min_persistence, n_cut, auto, timings)
         start = time.perf_counter()
@@ -127,10 +135,10 @@ def segment_to_zarr(volume, outputs, *, operator="weighted", n_regions=None, min
                    compute=lambda x: run(x, stage="labels"))
         labels = read_zarr(paths["labels"]).data
         timings["labels"] = time.perf_counter() - start
-        choice = MaskChoice(None, "none", "none", int(np.prod(data.shape)))
         seg = Segmentation(labels, curvature, hierarchy, k, entry.name, threshold, scale, spacing,
                            timings, cut, choice, smooth)
-        say(f"{volume.name}: {k} regions from {len(hierarchy.maxima)} maxima; writing")
+        say(f"{volume.name}: {k} regions{choice.phrase()} from {len(hierarchy.maxima)} maxima; "
+            "writing")
         info = summary(seg, name=volume.name, source=volume.path,
                        checksum=checksum, files=volume.files, frame=frame,
                        requested_regions=n_regions)
@@ -141,7 +149,8 @@ def segment_to_zarr(volume, outputs, *, operator="weighted", n_regions=None, min
         info["outputs"] = {kind: str(path) for kind, path in outputs.targets.items()}
         curve = (hierarchy.event_persistence, hierarchy.n_components, threshold)
         title = f"{volume.name}: {k} regions, {entry.name.replace('_', '-')} curvature"
-        title += f", smoothed sigma {smooth:g} (blockwise)" if smooth else " (blockwise)"
+        title += f", smoothed sigma {smooth:g}" if smooth else ""
+        title += f", mask {choice.used} (blockwise)" if choice.mask is not None else " (blockwise)"
         write_preview(paths["preview"], data, curvature, labels, title=title, persistence=curve)
         if "persistence" in paths:
             write_persistence_plot(paths["persistence"], *curve, k)

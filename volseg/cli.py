@@ -242,27 +242,6 @@ def _is_lazy(volume) -> bool:
     return is_lazy(volume.data)
 
 
-def _blockwise_mask(data, mask):
-    """The mask rule of a lazy volume: none, or 'auto' resolved to none (the blockwise
-    Morse stage has no masks yet)."""
-    from .masks import AUTO_PLATEAU_SHARE
-
-    if mask in (None, "none"):
-        return None
-    if mask == "auto":
-        import dask
-
-        lowest, = dask.compute(data.min())
-        share, = dask.compute((data == lowest).mean())
-        if share <= AUTO_PLATEAU_SHARE:
-            return None
-        raise UsageError(f"{share:.1%} of the volume is its minimum value, which --mask auto "
-                         "would mask, and the blockwise path has no masks yet; pass --mask none "
-                         "to segment every voxel, or drop --chunks for a volume that fits in memory")
-    raise UsageError(f"--mask {mask} is not available on the blockwise path yet (Zarr input or "
-                     "--chunks); use --mask none")
-
-
 def segment_to_files(volume, outputs, *, operator="weighted", n_regions=None,
                      min_persistence=None, value_scale=None, noise=None, seed=0, mask=None,
                      smooth=0.0, engine=None, say=lambda message: None) -> dict:
@@ -278,7 +257,7 @@ def segment_to_files(volume, outputs, *, operator="weighted", n_regions=None,
 
         return segment_to_zarr(volume, outputs, operator=operator, n_regions=n_regions,
                                min_persistence=min_persistence, value_scale=value_scale,
-                               smooth=smooth, engine=engine, say=say)
+                               mask=mask, smooth=smooth, engine=engine, say=say)
     data = np.asarray(volume)
     if noise:
         data = add_value_noise(data, noise, seed=seed)
@@ -289,8 +268,8 @@ def segment_to_files(volume, outputs, *, operator="weighted", n_regions=None,
     info = summary(result, name=name, source=volume.path, checksum=files_sha256(volume.files),
                    files=volume.files, frame=volume.frame, noise=noise, seed=seed,
                    requested_regions=n_regions)
-    masked = "" if result.mask.mask is None else f" in a {result.mask.used} mask of {result.mask.voxels} voxels"
-    say(f"{name}: {result.n_regions} regions{masked} from {len(result.hierarchy.maxima)} maxima; writing")
+    say(f"{name}: {result.n_regions} regions{result.mask.phrase()} from "
+        f"{len(result.hierarchy.maxima)} maxima; writing")
     info["timings_s"]["total"] = round(time.perf_counter() - started, 4)
     title = f"{name}: {result.n_regions} regions, {result.operator.replace('_', '-')} curvature"
     if result.smooth:
@@ -340,6 +319,15 @@ def _segment_all(volumes, out_dir, args, say, **options):
     return summaries
 
 
+def _check_mask_rule(rule):
+    from .masks import check_rule
+
+    try:
+        check_rule(rule)
+    except ValueError as err:
+        raise UsageError(f"--mask: {err}") from None
+
+
 def _check_cut_options(args):
     if isinstance(args.regions, int) and args.regions < 1:
         raise UsageError(f"--regions must be at least 1, got {args.regions}")
@@ -360,15 +348,15 @@ def _cmd_segment(args):
         raise UsageError(f"--chunks must be at least 2 voxels, got {args.chunks}")
     if not (np.isfinite(args.smooth) and args.smooth >= 0):
         raise UsageError(f"--smooth must be a non-negative number of voxels, got {args.smooth}")
+    mask = args.mask if args.mask_threshold is None else f"value>{args.mask_threshold!r}"
+    _check_mask_rule(mask)
     volumes = [_load_for_budget(name, args, engine.memory_limit, say) for name in args.inputs]
     if args.chunks is not None:
         volumes = [_chunked(v, args.chunks) for v in volumes]
-    mask = args.mask if args.mask_threshold is None else f"value>{args.mask_threshold!r}"
     for volume in volumes:
         if _is_lazy(volume):   # what the blockwise path cannot do, refused before it starts
             if args.noise:
                 raise UsageError("--noise needs the volume in memory; drop --chunks")
-            _blockwise_mask(volume.data, mask)
     _check_out_dir(out_dir)
     summaries = _segment_all(
         volumes, out_dir, args, say, operator=normalize_operator(args.operator),

@@ -17,6 +17,8 @@ Rules (`foreground_mask`):
 - ``"value>T"``, ``"value>=T"``, ``"value<T"``, ``"value<=T"``: a threshold;
 - ``"otsu"``: value above Otsu's threshold (scikit-image);
 - a boolean array of the volume's shape.
+
+A Dask volume (the blockwise path) gets the same mask, lazily (`foreground_mask`).
 """
 
 from __future__ import annotations
@@ -27,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["foreground_mask", "MaskChoice", "AUTO_PLATEAU_SHARE", "MASK_RULES"]
+__all__ = ["foreground_mask", "check_rule", "MaskChoice", "AUTO_PLATEAU_SHARE", "MASK_RULES"]
 
 #: ``"auto"`` masks the minimum plateau when it covers more than this share of the voxels.
 AUTO_PLATEAU_SHARE = 0.5
@@ -51,14 +53,21 @@ class MaskChoice:
     def describe(self) -> dict:
         return {"rule": self.rule, "used": self.used, "voxels": self.voxels}
 
+    def phrase(self) -> str:
+        """" in a <used> mask of <voxels> voxels", or "" without a mask (for messages)."""
+        return "" if self.mask is None else f" in a {self.used} mask of {self.voxels} voxels"
+
 
 def foreground_mask(volume, rule="auto") -> MaskChoice:
     """Resolve a mask rule (or array) for `volume`; see the module docstring.
 
     Parameters
     ----------
-    volume : (X, Y, Z) array_like
-    rule : str, bool ndarray or None
+    volume : (X, Y, Z) array_like or Dask array
+        A Dask volume gets a lazy Dask mask of the same chunks, equal to the one of
+        the computed volume (one or two passes over the blocks: the minimum for
+        ``"auto"``/``"nonzero"``, the histogram for ``"otsu"``, and the count).
+    rule : str, bool ndarray (or Dask array) or None
 
     Returns
     -------
@@ -77,39 +86,102 @@ def foreground_mask(volume, rule="auto") -> MaskChoice:
     >>> foreground_mask(volume, "auto").describe()
     {'rule': 'auto', 'used': 'nonzero', 'voxels': 8}
     """
-    data = np.asarray(volume)
+    from ._validate import is_lazy
+
+    lazy = is_lazy(volume)
+    data = volume if lazy else np.asarray(volume)
     if rule is None or (isinstance(rule, str) and rule.strip().lower() == "none"):
         return MaskChoice(None, "none", "none", int(data.size))
     if not isinstance(rule, str):
-        mask = np.asarray(rule)
+        mask = rule if is_lazy(rule) else np.asarray(rule)
         if mask.dtype != bool or mask.shape != data.shape:
             raise ValueError(f"`mask` must be a boolean array of the volume's shape {data.shape}, "
                              f"got {mask.dtype} {mask.shape}")
-        return _checked(MaskChoice(mask, "array", "array", int(mask.sum())))
-    name = rule.strip().lower()
-    if name == "auto":
-        share = float(np.mean(data == data.min()))
-        if share <= AUTO_PLATEAU_SHARE:
-            return MaskChoice(None, "auto", "none", int(data.size))
-        return _checked(MaskChoice(data > data.min(), "auto", "nonzero", 0))
-    if name == "nonzero":
-        return _checked(MaskChoice(data > data.min(), "nonzero", "nonzero", 0))
+        if lazy:
+            mask = _like(mask, data)
+        return _checked(MaskChoice(mask, "array", "array", 0))
+    name, threshold = check_rule(rule)
+    if name in ("auto", "nonzero"):
+        mask = data > _compute(data.min())
+        if name == "auto":
+            # The minimum plateau is the complement of the mask (no NaN: the share of
+            # voxels equal to the minimum).
+            voxels = _count(mask)
+            if 1.0 - voxels / data.size <= AUTO_PLATEAU_SHARE:
+                return MaskChoice(None, "auto", "none", int(data.size))
+            return _checked(MaskChoice(mask, "auto", "nonzero", voxels))
+        return _checked(MaskChoice(mask, "nonzero", "nonzero", 0))
     if name == "otsu":
-        from skimage.filters import threshold_otsu
-
-        threshold = float(threshold_otsu(data.ravel()))
+        threshold = _otsu(data)
         return _checked(MaskChoice(data > threshold, "otsu", f"value>{threshold:g}", 0))
-    match = _THRESHOLD.match(name)
-    if match is None:
-        raise ValueError(f"unknown `mask` rule {rule!r}; use one of {', '.join(MASK_RULES)} "
-                         "(T a number), or a boolean array")
-    op, value = match[1], float(match[2])
+    op, value = threshold
     compare = {">": np.greater, ">=": np.greater_equal, "<": np.less, "<=": np.less_equal}[op]
     return _checked(MaskChoice(compare(data, value), rule, f"value{op}{value:g}", 0))
 
 
+def check_rule(rule: str) -> tuple:
+    """(name, None) of a named rule or ("value", (op, T)) of a threshold; a ValueError
+    naming the rules for anything else. Needs no data: the command line checks its
+    --mask before it reads a volume."""
+    name = rule.strip().lower()
+    if name in ("auto", "none", "nonzero", "otsu"):
+        return name, None
+    match = _THRESHOLD.match(name)
+    if match is None:
+        raise ValueError(f"unknown `mask` rule {rule!r}; use one of {', '.join(MASK_RULES)} "
+                         "(T a number), or a boolean array")
+    return "value", (match[1], float(match[2]))
+
+
 def _checked(choice: MaskChoice) -> MaskChoice:
-    voxels = int(choice.mask.sum())
+    voxels = choice.voxels or _count(choice.mask)
     if voxels == 0:
         raise ValueError(f"the mask {choice.rule!r} ({choice.used}) selects no voxel")
     return MaskChoice(choice.mask, choice.rule, choice.used, voxels)
+
+
+def _compute(x):
+    """A numpy result of `x`, computed if it is lazy (on Dask's current scheduler)."""
+    return x.compute() if hasattr(x, "compute") else x
+
+
+def _count(mask) -> int:
+    return int(_compute(mask.sum()))
+
+
+def _like(mask, data):
+    """A mask array as a Dask array of the volume's chunks."""
+    import dask.array as da
+
+    return da.asarray(mask).rechunk(data.chunks)
+
+
+def _otsu(data) -> float:
+    """scikit-image's `threshold_otsu` of the volume, from a histogram summed over the
+    blocks for a Dask volume: the same histogram as scikit-image's of the whole array
+    (integers: one bin per value from the minimum to the maximum; floats: 256 bins
+    over [min, max]), so the same threshold."""
+    from skimage.filters import threshold_otsu
+
+    if not hasattr(data, "compute"):
+        return float(threshold_otsu(data.ravel()))
+    import dask
+    import dask.array as da
+
+    lo, hi = (v.item() for v in dask.compute(data.min(), data.max()))
+    if lo == hi:
+        return float(lo)           # threshold_otsu of a constant image: its value
+    if data.dtype.kind in "biu":
+        width = int(hi) - int(lo) + 1
+        counts = data.map_blocks(
+            lambda b: np.bincount((b.astype(np.int64) - int(lo)).ravel(),
+                                  minlength=width)[None, None, None], dtype=np.int64,
+            chunks=((1,) * data.numblocks[0], (1,) * data.numblocks[1],
+                    (1,) * data.numblocks[2], (width,)), new_axis=3)
+        counts = _compute(counts.sum(axis=(0, 1, 2)))
+        centers = np.arange(int(lo), int(hi) + 1)
+    else:
+        counts, edges = da.histogram(data, bins=256, range=(lo, hi))
+        counts = _compute(counts)
+        centers = (edges[:-1] + edges[1:]) / 2
+    return float(threshold_otsu(hist=(counts, centers)))

@@ -385,9 +385,10 @@ def descending_complex(field: ArrayLike, *, adjacency=None, connectivity="kuhn",
 
     Parameters
     ----------
-    field : ndarray of real
+    field : ndarray of real, or 3-D Dask array
         On a grid: an N-d array (1-D, 2-D or 3-D), neighbours by `connectivity`.
-        On a graph: a 1-D array, one value per vertex, with `adjacency`.
+        On a graph: a 1-D array, one value per vertex, with `adjacency`. A Dask
+        array is built block by block (DESIGN.md section 10), the same result.
     adjacency : scipy sparse matrix, (E, 2) int array or networkx graph, optional
         Vertex adjacency (symmetrised; self-loops ignored). Structure, not weight:
         any stored nonzero of a sparse matrix is an edge, whatever its value or
@@ -395,7 +396,7 @@ def descending_complex(field: ArrayLike, *, adjacency=None, connectivity="kuhn",
         ``list(graph.nodes)``.
     connectivity : {'kuhn', 4, 8, 6, 18, 26, 2}
         Grid neighbourhood (see `grid_offsets`); ignored with `adjacency`.
-    mask : bool ndarray of the field's shape, optional
+    mask : bool ndarray (or Dask array) of the field's shape, optional
         The vertices that take part (DESIGN.md section 9): the graph is restricted
         to them (an edge only between two masked vertices), so maxima, cells,
         saddles and persistence are those of the foreground, exactly as with the
@@ -416,12 +417,12 @@ def descending_complex(field: ArrayLike, *, adjacency=None, connectivity="kuhn",
     from . import _morse_kernels as kernels
 
     if type(field).__module__.startswith("dask."):
-        if mask is not None or adjacency is not None:
-            raise ValueError("a Dask `field` is segmented on its grid without a mask for now; "
-                             "compute it (numpy) to use `mask` or `adjacency`")
+        if adjacency is not None:
+            raise ValueError("a Dask `field` is segmented on its grid; compute it (numpy) "
+                             "to use `adjacency`")
         from ._morse_blocks import dask_descending_complex
 
-        return dask_descending_complex(field, connectivity)
+        return dask_descending_complex(field, connectivity, mask=mask)
     phases = _Phases()
     values, mask = _validate_field(field, mask, adjacency)
     graph = _neighbourhood(values, mask, adjacency, connectivity)
@@ -622,15 +623,11 @@ class MorseHierarchy:
 
             # The table as one shared task: a distributed scheduler sends it to each
             # worker once, not inside every block's task.
-            table = dask.delayed(region, pure=True)
+            table = dask.delayed(_with_outside(region, self.mask), pure=True)
             return self.cells.map_blocks(lambda cells, table: table[cells], table,
                                          dtype=region.dtype,
                                          meta=np.empty((0,) * self.cells.ndim, region.dtype))
-        if self.mask is None:
-            return region[self.cells]
-        # cells are -1 outside the mask: the table's last entry, 0, labels them.
-        table = np.concatenate([region + 1, np.zeros(1, dtype=region.dtype)])
-        return table[self.cells]
+        return _with_outside(region, self.mask)[self.cells]
 
     def region_adjacency(self, labels=None, **cut):
         """The regions of a cut as a networkx graph.
@@ -694,3 +691,11 @@ class MorseHierarchy:
             for k, s in zip(key[order][last], saddles[order][last], strict=True):
                 graph.add_edge(int(k // len(sizes)), int(k % len(sizes)), saddle=float(s))
         return graph
+
+
+def _with_outside(region, mask):
+    """The relabelling table of a cut: `region` without a mask; with one, regions
+    1..k and a last entry 0 for the cells of -1 (outside the mask)."""
+    if mask is None:
+        return region
+    return np.concatenate([region + 1, np.zeros(1, dtype=region.dtype)])

@@ -183,18 +183,17 @@ def segment_volume(
 def _segment_dask(volume, entry, min_persistence, n_regions, auto, value_scale, spacing,
                   boundary, mask, smooth) -> Segmentation:
     """`segment_volume` of a Dask array: smoothing, curvature and Morse stage block by
-    block (DESIGN.md section 10), labels and curvature returned as lazy Dask arrays."""
+    block (DESIGN.md section 10), labels, curvature and mask returned as lazy Dask
+    arrays."""
     from .curvature import grid_curvature
-    from .masks import MaskChoice
+    from .masks import foreground_mask
 
-    if mask not in (None, "none"):
-        raise ValueError("a Dask volume is segmented without a mask for now; "
-                         "pass mask=None, or compute it (numpy)")
     smooth = _validate.smooth(smooth)
     data = getattr(volume, "data", volume)
     spacing = _validate.spacing(spacing, getattr(volume, "spacing", (1.0, 1.0, 1.0)))
     check_boundary(boundary)
     _validate.lazy_volume_array(data)
+    choice = foreground_mask(data, mask)     # a lazy mask (its rule's passes run now)
     timings = {}
     start = time.perf_counter()
     data = gaussian(data, smooth)
@@ -204,10 +203,10 @@ def _segment_dask(volume, entry, min_persistence, n_regions, auto, value_scale, 
                                boundary=boundary)
     timings["value scale"] = time.perf_counter() - start
     start = time.perf_counter()
-    hierarchy = descending_complex(curvature)       # computes the curvature block by block
+    # computes the curvature block by block
+    hierarchy = descending_complex(curvature, mask=choice.mask)
     timings["curvature and morse"] = time.perf_counter() - start
     labels, k, threshold, cut = _cut(hierarchy, min_persistence, n_regions, auto, timings)
-    choice = MaskChoice(None, "none", "none", int(np.prod(data.shape)))
     return Segmentation(labels, curvature, hierarchy, k, entry.name, threshold, value_scale,
                         spacing, timings, cut, choice, smooth)
 
