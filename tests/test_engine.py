@@ -154,6 +154,7 @@ def test_no_worker_holds_more_than_a_few_blocks_and_the_shells(tmp_path):
                       dashboard_address=None) as cluster, Client(cluster):
         peak.scheduler = cluster.scheduler
         cluster.scheduler.add_plugin(peak)
+        # (No NIfTI outputs: those of a small volume are read whole from the stores.)
         with OutputSet(tmp_path / "o", "big", output_names("big", False, True)) as outputs:
             info = segment_to_zarr(Volume(lazy.data, frame=lazy.frame, name="big"), outputs)
     halo_block = 14**3 * 8

@@ -92,6 +92,13 @@ def test_cli_zarr_in_zarr_out_equals_in_memory(tmp_path, volume, capsys):
     b = json.loads((tmp_path / "m" / "vol_summary.json").read_text())
     assert a["regions"] == b["regions"] and a["n_maxima"] == b["n_maxima"]
     assert a["persistence"] == b["persistence"]
+    # A small volume also gets the in-memory path's NIfTI files, the same ones.
+    for kind in ("labels", "curvature"):
+        lazy, eager = (nibabel.load(tmp_path / d / f"vol_{kind}.nii.gz") for d in ("z", "m"))
+        assert lazy.get_data_dtype() == eager.get_data_dtype()
+        assert np.array_equal(lazy.affine, eager.affine)
+        assert np.array_equal(np.asanyarray(lazy.dataobj), np.asanyarray(eager.dataobj))
+        assert a["outputs"][f"{kind}_nifti"].endswith(f"vol_{kind}.nii.gz")
     # --chunks takes the same path for any input; outputs are refused, then replaced.
     assert main(["segment", str(tmp_path / "vol.npy"), "-o", str(tmp_path / "z2"), "--regions",
                  "9", "--chunks", "9", "-q"]) == 0
@@ -102,6 +109,16 @@ def test_cli_zarr_in_zarr_out_equals_in_memory(tmp_path, volume, capsys):
     assert main(["segment", str(tmp_path / "vol.zarr"), "-o", str(tmp_path / "z"), "--regions", "4",
                  "--force", "-q"]) == 0
     assert zarr.open(str(tmp_path / "z" / "vol_labels.zarr"), mode="r")[:].max() == 4
+
+
+def test_cli_blockwise_writes_no_nifti_above_its_size_limit(tmp_path, volume, monkeypatch):
+    import volseg.outputs
+
+    monkeypatch.setattr(volseg.outputs, "BLOCKWISE_NIFTI_VOXELS", volume.size - 1)
+    write_zarr(tmp_path / "vol.zarr", volume, chunks=(10, 9, 7))
+    assert main(["segment", str(tmp_path / "vol.zarr"), "-o", str(tmp_path / "z"), "-q"]) == 0
+    assert sorted(os.listdir(tmp_path / "z")) == [
+        "vol_curvature.zarr", "vol_labels.zarr", "vol_preview.png", "vol_summary.json"]
 
 
 @pytest.mark.parametrize("source", ["npy", "zarr"])

@@ -13,7 +13,9 @@ before from disk instead: inside the output set's staging folder,
 3. the Morse hierarchy from that store (`descending_complex` on Dask: three passes
    over its blocks, the cells computed once into the work folder below, the cell
    graph on this process);
-4. the labels, block by block, written to ``<stem>_labels.zarr``;
+4. the labels, block by block, written to ``<stem>_labels.zarr`` (and, for a volume
+   of at most `volseg.outputs.BLOCKWISE_NIFTI_VOXELS`, labels and curvature to the
+   in-memory path's NIfTI files, from the stores);
 5. the summary (region sizes: one pass over the labels) and the preview (three mid
    slices: read, not computed).
 
@@ -49,7 +51,8 @@ def segment_to_zarr(volume, outputs, *, operator="weighted", n_regions=None, min
                     value_scale=None, boundary="linear", mask=None, smooth=0.0, engine=None,
                     say=lambda message: None) -> dict:
     """Segment a lazily read `volume` (its data a 3-D Dask array) into an entered
-    `OutputSet` named by ``output_names(stem, blockwise=True)``; returns the summary.
+    `OutputSet` named by ``output_names(stem, blockwise=True, voxels=...)``; returns the
+    summary.
     `mask`: a `volseg.masks.foreground_mask` rule, resolved before anything is written
     (its passes over the input: the minimum and the count, or the histogram), its
     array read again from the input by each Morse pass.
@@ -64,7 +67,7 @@ def segment_to_zarr(volume, outputs, *, operator="weighted", n_regions=None, min
     from .curvature import default_value_scale, get_operator
     from .curvature._grid import check_boundary
     from .curvature._grid_blocks import dask_grid_curvature
-    from .io import Frame, read_zarr, write_zarr
+    from .io import Frame, read_zarr, write_volume, write_zarr
     from .masks import foreground_mask
     from .outputs import files_sha256, summary
     from .preview import write_persistence_plot, write_preview
@@ -134,6 +137,10 @@ def segment_to_zarr(volume, outputs, *, operator="weighted", n_regions=None, min
         write_zarr(paths["labels"], labels.astype(np.min_scalar_type(k)), frame=frame,
                    compute=lambda x: run(x, stage="labels"))
         labels = read_zarr(paths["labels"]).data
+        if "labels_nifti" in paths:     # a small volume: the in-memory path's files too
+            write_volume(paths["labels_nifti"], np.asarray(labels), frame=frame)
+            write_volume(paths["curvature_nifti"], np.asarray(curvature).astype(np.float32),
+                         frame=frame)
         timings["labels"] = time.perf_counter() - start
         seg = Segmentation(labels, curvature, hierarchy, k, entry.name, threshold, scale, spacing,
                            timings, cut, choice, smooth)

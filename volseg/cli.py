@@ -232,7 +232,8 @@ def _output_sets(volumes, out_dir, *, force, wait, persistence_plot=False):
                 f"{seen[volume.name]} and {volume.path or volume.name} would both write "
                 f"{out_dir / volume.name}_*; segment them into different folders")
         seen[volume.name] = volume.path or volume.name
-    return [OutputSet(out_dir, v.name, output_names(v.name, persistence_plot, _is_lazy(v)),
+    return [OutputSet(out_dir, v.name, output_names(v.name, persistence_plot, _is_lazy(v),
+                                                    int(np.prod(v.shape))),
                       force=force, wait=wait) for v in volumes]
 
 

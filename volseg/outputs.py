@@ -19,7 +19,7 @@ from . import _json
 from ._version import __version__
 from .io import Frame, OutputSet, write_volume
 
-__all__ = ["OUTPUT_SUFFIXES", "output_names", "files_sha256", "summary", "result_summary",
+__all__ = ["OUTPUT_SUFFIXES", "BLOCKWISE_NIFTI_VOXELS", "output_names", "files_sha256", "summary", "result_summary",
            "input_summary", "write_segmentation"]
 
 OUTPUT_SUFFIXES = {"labels": "_labels.nii.gz", "curvature": "_curvature.nii.gz",
@@ -28,13 +28,23 @@ OUTPUT_SUFFIXES = {"labels": "_labels.nii.gz", "curvature": "_curvature.nii.gz",
 
 #: The blockwise path's labels and curvature: chunked Zarr stores, never whole in memory.
 BLOCKWISE_SUFFIXES = {"labels": "_labels.zarr", "curvature": "_curvature.zarr"}
+#: Up to this many voxels the blockwise path also writes the NIfTI files of the
+#: in-memory path (``labels_nifti``, ``curvature_nifti``), each read whole from its
+#: store: at 256^3 that is 134 MB for the float64 curvature and its float32 copy.
+BLOCKWISE_NIFTI_VOXELS = 256**3
 
 
-def output_names(stem: str, persistence_plot: bool = False, blockwise: bool = False) -> dict:
+def output_names(stem: str, persistence_plot: bool = False, blockwise: bool = False,
+                 voxels: int | None = None) -> dict:
     """Kind -> file name of the outputs of `stem` (with ``<stem>_persistence.png``
-    when `persistence_plot`; labels and curvature as ``.zarr`` when `blockwise`)."""
+    when `persistence_plot`; labels and curvature as ``.zarr`` when `blockwise`, and
+    also as NIfTI when the volume's `voxels` are given and at most
+    `BLOCKWISE_NIFTI_VOXELS`)."""
     names = {kind: stem + suffix for kind, suffix in OUTPUT_SUFFIXES.items()}
     if blockwise:
+        if voxels is not None and voxels <= BLOCKWISE_NIFTI_VOXELS:
+            names.update({f"{kind}_nifti": stem + OUTPUT_SUFFIXES[kind]
+                          for kind in BLOCKWISE_SUFFIXES})
         names.update({kind: stem + suffix for kind, suffix in BLOCKWISE_SUFFIXES.items()})
     if persistence_plot:
         names["persistence"] = f"{stem}_persistence.png"
