@@ -359,3 +359,19 @@ def test_events_do_not_depend_on_how_edges_were_found(rng):
             morse._CHUNK_VERTICES = original
         for name in ("young", "elder", "target", "saddle"):
             assert np.array_equal(getattr(result, name), getattr(expected, name)), (size, name)
+
+
+def test_region_count_cut_keeps_the_events_a_full_sort_would():
+    # `_all_but_most_persistent` selects in linear time what np.lexsort((young, -p))
+    # ranks first: the most persistent events, ties to the older young maximum.
+    from volseg.morse import _all_but_most_persistent
+
+    rng = np.random.default_rng(0)
+    for _ in range(200):
+        n = int(rng.integers(0, 40))
+        p = np.round(rng.random(n) * rng.integers(1, 5)) / 4          # many exact ties
+        young = (rng.permutation(n) + 1).astype(np.int32)
+        for keep in range(n + 2):
+            expected = np.ones(n, dtype=bool)
+            expected[np.lexsort((young, -p))[:keep]] = False
+            assert np.array_equal(_all_but_most_persistent(p, young, keep), expected)

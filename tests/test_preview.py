@@ -39,3 +39,17 @@ def test_persistence_plot_alone(tmp_path):
     path = write_persistence_plot(tmp_path / "curve.png", np.geomspace(1, 1e-3, 40), 1, 0.01, 20)
     image = Image.open(path)
     assert image.format == "PNG" and image.size[0] > 200
+
+
+def test_persistence_curve_drawn_in_blocks_is_the_same_image(monkeypatch):
+    # The curve's corners are made a block of events at a time (memory): the seams
+    # between blocks must not change a pixel (ties, zeros and a wide range included).
+    import volseg.preview as preview
+
+    rng = np.random.default_rng(3)
+    p = rng.lognormal(-3, 2, 5000)
+    p[:500], p[500:900] = 0.0, p[900]
+    whole = preview.persistence_panel(p, 2, 0.1, 30)
+    for block in (1, 7, 1000):
+        monkeypatch.setattr(preview, "_CURVE_BLOCK", block)
+        assert np.array_equal(preview.persistence_panel(p, 2, 0.1, 30), whole)

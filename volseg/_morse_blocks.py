@@ -88,7 +88,7 @@ def _summary_of_block(halo, origin, shape, offsets, masked):
 def _resolve(keys, ends):
     """Pointer jumping: each outer-layer voxel's end resolved to a maximum gid."""
     order = np.argsort(keys)
-    keys, ends = keys[order], ends[order].copy()
+    keys, ends = keys[order], ends[order]      # (copies: ends is written below)
     for _ in range(64):
         leaving = ends < 0
         if not leaving.any():
@@ -102,14 +102,9 @@ def _cells_of_block(halo, origin, shape, offsets, masked, keys, ids):
     """Stage 3: the maximum id of every owned voxel, from the block's own table
     (`_block_tables`); -1 outside the mask."""
     result, _ = _ascend(halo, origin, shape, offsets, masked)
-    # A block reaches few distinct ends: look those up, not every voxel.
-    ends, inverse = np.unique(result.ravel(), return_inverse=True)
-    inside = ends != kernels.OUTSIDE             # (the smallest end, if any)
-    ends = ends[inside]
-    ends[ends < 0] = -1 - ends[ends < 0]         # an exit: the neighbour's voxel it enters
-    found = np.full(len(inside), -1, dtype=ids.dtype)
-    found[inside] = ids[np.searchsorted(keys, ends)]
-    return found[inverse].reshape(result.shape)
+    cells = np.empty(result.size, dtype=ids.dtype)
+    kernels.cells_of_ends(result.ravel(), keys, ids, cells)
+    return cells.reshape(result.shape)
 
 
 def _block_tables(summaries, layer_keys, layer_ends, maxima_sorted, maxima_ids):
@@ -148,9 +143,11 @@ def _pairs_of_block(halo_values, halo_cells, origin, shape, offsets):
     strides = np.array([s // values.itemsize for s in values.strides], dtype=np.int64)
     owned = np.arange(values.size).reshape(values.shape)[1:-1, 1:-1, 1:-1].ravel()
     owned = owned[values.ravel()[owned] > -np.inf]         # the block's voxels in the mask
+    # 4-byte voxel ids below 2^31 voxels (up to 1290^3): the client holds ~1 per maximum
+    gid_type = np.int32 if np.prod(shape) < 2**31 else np.int64
     if not len(owned):
-        nothing = np.zeros(0, dtype=np.int64)
-        return nothing, nothing, nothing, np.zeros(0)
+        nothing = np.zeros(0, dtype=halo_cells.dtype)
+        return nothing, nothing, np.zeros(0, dtype=gid_type), np.zeros(0)
     graph = _Neighbourhood(values.ravel(), owned, True, offsets @ strides,
                            np.zeros(1, np.int64), np.zeros(1, np.int64), values.shape)
     a, b, saddle = _cross_edges(_morse_kernels, graph, local.ravel(), len(cells))
@@ -160,7 +157,7 @@ def _pairs_of_block(halo_values, halo_cells, origin, shape, offsets):
     a, b, saddle = a[keep], b[keep], saddle[keep]
     i, j, k = np.unravel_index(saddle, values.shape)
     gids = ((origin[0] + i - 1) * shape[1] + origin[1] + j - 1) * shape[2] + origin[2] + k - 1
-    return cells[a], cells[b], gids, graph.values[saddle]
+    return cells[a], cells[b], gids.astype(gid_type), graph.values[saddle]
 
 
 def _per_block(function, *arrays, **kwargs):
@@ -238,11 +235,12 @@ def dask_descending_complex(field, connectivity="kuhn", mask=None, persist=None,
         h, origin(block_id), shape, offsets, masked)), halo), compute,
         "Morse: steepest ascent per block")
     phases.done("blocks: steepest ascent, path compression")
+    summaries = [list(s) for s in summaries]     # their columns dropped once joined
     maxima = np.concatenate([s[0] for s in summaries])
     if not len(maxima):
         raise ValueError("`mask` selects no vertex")
-    maxima_values = np.concatenate([s[1] for s in summaries])
-    layer_keys, layer_ends = _resolve(np.concatenate([s[2] for s in summaries]),
+    maxima_values = _joined(summaries, 1)
+    layer_keys, layer_ends = _resolve(_joined(summaries, 2),
                                       np.concatenate([s[3] for s in summaries]))
     order = np.lexsort((maxima, maxima_values))[::-1]       # decreasing (value, index)
     maxima, maxima_values = maxima[order], maxima_values[order]
@@ -288,15 +286,18 @@ def dask_descending_complex(field, connectivity="kuhn", mask=None, persist=None,
     del order
     n_maxima = len(maxima)
     out = [np.empty(max(n_maxima - 1, 0), dtype=t) for t in (np.int32, np.int32, np.int32, np.int64)]
-    n_events = _morse_kernels.kruskal(edge_a, edge_b, edge_v, n_maxima, *out)
-    del edge_a, edge_b
-    young, elder, target, saddle = (x[:n_events].copy() for x in out)
+    # Kruskal records each event's edge (its index in place of a saddle): the events'
+    # saddles and their values are then two gathers.
+    edge = np.arange(len(edge_a), dtype=index_type if len(edge_a) < 2**31 - 1 else np.int64)
+    n_events = _morse_kernels.kruskal(edge_a, edge_b, edge, n_maxima, *out)
+    del edge_a, edge_b, edge
+    young, elder, target, event_edge = (x[:n_events].copy() for x in out)
     del out
+    saddle, saddle_values = edge_v[event_edge].astype(np.int64), edge_f[event_edge]
+    del edge_v, edge_f, event_edge
     phases.done("client: saddle order, union-find")
-    saddle_values = _values_at(edge_v, edge_f, saddle)
-    del edge_v, edge_f
     return MorseHierarchy(
-        shape=tuple(int(s) for s in shape), cells=cells, maxima=maxima.astype(np.int64),
+        shape=tuple(int(s) for s in shape), cells=cells, maxima=maxima,
         values=maxima_values, young=young, elder=elder, target=target, saddle=saddle,
         saddle_value=saddle_values, mask=mask, _field=field, _connectivity=connectivity,
         timings=phases.times)
@@ -308,16 +309,3 @@ def _joined(parts, k):
     for p in parts:
         p[k] = None
     return column
-
-
-def _values_at(gids, values, wanted):
-    """The value of each `wanted` gid, looked up among the saddles' (gid, value): the
-    few wanted ones are sorted (events can share a saddle), the many edges searched."""
-    if not len(wanted):
-        return np.zeros(0)
-    unique, inverse = np.unique(wanted, return_inverse=True)
-    where = np.minimum(np.searchsorted(unique, gids), len(unique) - 1)
-    hit = unique[where] == gids
-    found = np.empty(len(unique))
-    found[where[hit]] = values[hit]
-    return found[inverse]

@@ -77,6 +77,32 @@ def find_root(parent, x):
 
 
 @numba.njit(cache=True, nogil=True)
+def regions_of_cut(young, target, merged, region):
+    """region[m] for each maximum m of a cut: the events with `merged` join the young
+    maximum to its target; each resulting component is numbered by its lowest maximum
+    id (its highest maximum), in increasing order. Returns the number of regions."""
+    n = len(region)
+    parent = np.arange(n)
+    for e in range(len(young)):
+        if merged[e]:
+            a = find_root(parent, young[e])
+            b = find_root(parent, target[e])
+            if a < b:
+                parent[b] = a
+            elif b < a:
+                parent[a] = b
+    count = 0
+    for m in range(n):        # a root is its component's lowest id: numbered first
+        r = find_root(parent, m)
+        if r == m:
+            region[m] = count
+            count += 1
+        else:
+            region[m] = region[r]
+    return count
+
+
+@numba.njit(cache=True, nogil=True)
 def spanning_edges(edge_a, edge_b, order, n_cells, keep):
     """The blockwise build's per-block forest (`_morse_blocks._pairs_of_block`):
     keep[e] = True for the edges of the maximum spanning forest, Kruskal from the
@@ -150,19 +176,21 @@ def _before(i, j, saddle, edge_a, edge_b):
 
 
 @numba.njit(cache=True, nogil=True)
-def break_ties(order, ranked, saddle, edge_a, edge_b):
-    """Within each run of equal `ranked` values, sort `order` by (saddle vertex, a, b).
+def break_ties(order, values, saddle, edge_a, edge_b):
+    """Within each run of equal values, sort `order` by (saddle vertex, a, b).
 
-    `order` sorts the values (`ranked` = values[order]) in any tie order; afterwards it
-    sorts by (value, vertex, cell pair) exactly, so the result does not depend on the
-    sort used, nor on the order in which the edges were found (several edges can
-    share a saddle vertex, and which merges first decides the events' targets).
+    `order` sorts `values` in any tie order; afterwards it sorts by (value, vertex,
+    cell pair) exactly, so the result does not depend on the sort used, nor on the
+    order in which the edges were found (several edges can share a saddle vertex,
+    and which merges first decides the events' targets). The values are read through
+    `order` (no sorted copy: one array of the edges less at the client's peak).
     """
     n = len(order)
     start = 0
     while start < n:
         stop = start + 1
-        while stop < n and ranked[stop] == ranked[start]:
+        first = values[order[start]]
+        while stop < n and values[order[stop]] == first:
             stop += 1
         if stop - start > 32:
             run = order[start:stop].copy()

@@ -34,6 +34,7 @@ Dask's current scheduler.
 from __future__ import annotations
 
 import time
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
@@ -138,9 +139,13 @@ def segment_to_zarr(volume, outputs, *, operator="weighted", n_regions=None, min
                    compute=lambda x: run(x, stage="labels"))
         labels = read_zarr(paths["labels"]).data
         if "labels_nifti" in paths:     # a small volume: the in-memory path's files too
-            write_volume(paths["labels_nifti"], np.asarray(labels), frame=frame)
-            write_volume(paths["curvature_nifti"], np.asarray(curvature).astype(np.float32),
-                         frame=frame)
+            with ThreadPoolExecutor(2) as pool:      # (zlib releases the GIL)
+                jobs = [pool.submit(write_volume, paths["labels_nifti"], np.asarray(labels),
+                                    frame=frame),
+                        pool.submit(write_volume, paths["curvature_nifti"],
+                                    np.asarray(curvature).astype(np.float32), frame=frame)]
+                for job in jobs:
+                    job.result()
         timings["labels"] = time.perf_counter() - start
         seg = Segmentation(labels, curvature, hierarchy, k, entry.name, threshold, scale, spacing,
                            timings, cut, choice, smooth)

@@ -233,7 +233,7 @@ def _saddle_order(keys, saddle, edge_a, edge_b):
     from . import _morse_kernels as kernels
 
     order = np.argsort(keys)
-    kernels.break_ties(order, keys[order], saddle, edge_a, edge_b)
+    kernels.break_ties(order, keys, saddle, edge_a, edge_b)
     return order
 
 
@@ -568,30 +568,19 @@ class MorseHierarchy:
                 warnings.warn(
                     f"asked for {n_regions} regions but the graph has {self.n_components} "
                     "connected components; returning one region per component", stacklevel=3)
-            keep = max(n_regions - self.n_components, 0)
-            # Keep the `keep` most persistent events; ties: older (lower id) young first.
-            rank = np.lexsort((self.young, -p))
-            merged = np.ones(len(p), dtype=bool)
-            merged[rank[:keep]] = False
-            return merged
+            return _all_but_most_persistent(p, self.young, max(n_regions - self.n_components, 0))
         return p < (0.0 if min_persistence is None else min_persistence)
 
     def region_of_maximum(self, min_persistence=None, n_regions=None) -> NDArray[np.int32]:
-        """(M,) region label of each maximum for a cut (see `segment`)."""
-        from scipy.sparse import coo_matrix
-        from scipy.sparse.csgraph import connected_components
+        """(M,) region label of each maximum for a cut (see `segment`): the maxima
+        joined by the merged events, regions numbered by their highest maximum (a
+        compiled union-find: 8 M maxima take a few hundred ms and a few bytes each)."""
+        from . import _morse_kernels
 
         merged = self._merged_events(min_persistence, n_regions)
-        m = len(self.maxima)
-        graph = coo_matrix((np.ones(int(merged.sum())), (self.young[merged], self.target[merged])),
-                           shape=(m, m))
-        _, component = connected_components(graph, directed=False)
-        # Order regions by their highest maximum (lowest id).
-        first = np.full(component.max() + 1, m, dtype=np.int64)
-        np.minimum.at(first, component, np.arange(m))
-        rank = np.empty_like(first)
-        rank[np.argsort(first)] = np.arange(len(first))
-        return rank[component].astype(np.int32)
+        region = np.empty(len(self.maxima), dtype=np.int32)
+        _morse_kernels.regions_of_cut(self.young, self.target, merged, region)
+        return region
 
     def segment(self, min_persistence: float | None = None, n_regions: int | None = None):
         """Labels of a cut of the hierarchy: no recomputation, one gather per vertex.
@@ -691,6 +680,25 @@ class MorseHierarchy:
             for k, s in zip(key[order][last], saddles[order][last], strict=True):
                 graph.add_edge(int(k // len(sizes)), int(k % len(sizes)), saddle=float(s))
         return graph
+
+
+def _all_but_most_persistent(p, young, keep):
+    """True for every event but the `keep` most persistent; ties: the older (lower id)
+    young maximum first. The order of ``np.lexsort((young, -p))[:keep]``, in linear
+    time: the keep-th largest persistence by a partition, then only its ties sorted
+    (a full sort of 8 M events took 3 s per cut at 512^3)."""
+    merged = np.ones(len(p), dtype=bool)
+    if keep <= 0:
+        return merged
+    if keep >= len(p):
+        return ~merged
+    kth = np.partition(p, len(p) - keep)[len(p) - keep]      # the keep-th largest
+    above = p > kth
+    ties = np.flatnonzero(p == kth)
+    chosen = ties[np.argsort(young[ties], kind="stable")[:keep - int(above.sum())]]
+    merged[above] = False
+    merged[chosen] = False
+    return merged
 
 
 def _with_outside(region, mask):

@@ -62,6 +62,10 @@ def overlay(values, labels, lo, hi):
     return np.round(np.where((labels > 0)[..., None], blended, base)).astype(np.uint8)
 
 
+#: Events per block of the persistence curve's corners (`persistence_panel`).
+_CURVE_BLOCK = 1 << 20
+
+
 def _log_ticks(lo, hi):
     return [10.0**e for e in range(int(np.floor(np.log10(lo))), int(np.ceil(np.log10(hi))) + 1)]
 
@@ -121,18 +125,31 @@ def persistence_panel(persistence, n_components, threshold, n_regions, *, width=
     draw.text((width // 2, height - 14), "persistence threshold (log)", fill=_INK, font=small,
               anchor="ma")
     draw.text((6, top - 12), "regions (log)", fill=_INK, font=small)
-    # Regions at threshold t: n_components + #{p >= t}, a staircase falling at each p.
-    # Vectorised, and consecutive points in the same tenth of a pixel dropped: millions
-    # of events (8 M maxima at 512^3) draw the same few thousand pixels.
-    xs = np.repeat(x_of(np.maximum(p[::-1], x_lo)), 2)
-    counts = y_hi - np.arange(len(p))
-    ys = y_of(np.stack([counts, counts - 1], axis=1).ravel())
-    xs = np.concatenate([[x_of(x_lo)], xs, [x_of(x_hi)]])
-    ys = np.concatenate([[y_of(y_hi)], ys, [y_of(max(n_components, 1))]])
-    step = np.round(np.stack([xs, ys], axis=1) * 10)
-    keep = np.ones(len(xs), dtype=bool)
-    keep[1:-1] = (step[1:-1] != step[:-2]).any(axis=1)
-    draw.line(list(zip(xs[keep].tolist(), ys[keep].tolist(), strict=True)), fill=(31, 119, 180), width=2)
+    # Regions at threshold t: n_components + #{p >= t}, a staircase falling at each p,
+    # drawn through its corners; a corner in the same tenth of a pixel as the one
+    # before it is dropped: millions of events (8 M maxima at 512^3) draw the same few
+    # thousand pixels. A block of events at a time, so that the corners of all the
+    # events are never in memory at once (they were the preview's peak at 512^3).
+    ascending = p[::-1]
+    start = (x_of(x_lo), y_of(y_hi))
+    xs, ys = [np.array([start[0]])], [np.array([start[1]])]
+    previous = np.round(np.array(start) * 10)
+    for first in range(0, len(ascending), _CURVE_BLOCK):
+        block = ascending[first:first + _CURVE_BLOCK]
+        counts = y_hi - np.arange(first, first + len(block))
+        bx = np.repeat(x_of(np.maximum(block, x_lo)), 2)
+        by = y_of(np.stack([counts, counts - 1], axis=1).ravel())
+        step = np.round(np.stack([bx, by], axis=1) * 10)
+        keep = np.empty(len(step), dtype=bool)
+        keep[0] = (step[0] != previous).any()
+        keep[1:] = (step[1:] != step[:-1]).any(axis=1)
+        previous = step[-1]
+        xs.append(bx[keep])
+        ys.append(by[keep])
+    xs.append(np.array([x_of(x_hi)]))            # the last corner is always drawn
+    ys.append(np.array([y_of(max(n_components, 1))]))
+    xs, ys = np.concatenate(xs), np.concatenate(ys)
+    draw.line(list(zip(xs.tolist(), ys.tolist(), strict=True)), fill=(31, 119, 180), width=2)
     if threshold > 0 and x_lo < threshold < x_hi:
         x = x_of(threshold)
         draw.line([x, top, x, height - bottom], fill=(214, 39, 40), width=1)
