@@ -241,12 +241,17 @@ def test_sigkill_at_random_moments_leaves_no_set_or_one_complete_set(tmp_path):
 
     source = _raw(tmp_path / "k_24x24x24_uint8.raw", _blob((24, 24, 24)))
     complete = sorted(f"k_{k}" for k in KINDS)
+    # One whole run first: it fills numba's cache (a cold one makes every run slower
+    # than any fixed kill time) and times a run, so the kills span it on any machine.
+    started = time.perf_counter()
+    assert _segment_process(source, tmp_path / "timed").wait() == 0
+    duration = time.perf_counter() - started
     rng = np.random.default_rng(7)
     outcomes, stale = [], []
     for run in range(20):
         out = tmp_path / f"out{run}"
         process = _segment_process(source, out)
-        time.sleep(float(rng.uniform(0.3, 2.0)))
+        time.sleep(float(rng.uniform(0.15, 1.3)) * duration)
         process.kill()
         process.wait()
         visible = _visible(out)

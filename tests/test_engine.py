@@ -78,6 +78,37 @@ def test_work_folder_keeps_blocks_for_the_same_key_only(tmp_path):
     assert not other.resumed and other.finished("stage") == 0
 
 
+def test_a_run_killed_in_the_cells_pass_resumes_from_the_kept_path_ends(tmp_path, volume,
+                                                                        monkeypatch):
+    from volseg import _morse_blocks
+
+    np.save(tmp_path / "vol.npy", volume)
+    argv = ["segment", str(tmp_path / "vol.npy"), "--chunks", "8", "--mask", "none",
+            "--scheduler", "threads", "--workers", "1", "-q"]
+    assert main([*argv, "-o", str(tmp_path / "whole")]) == 0
+    expected = zarr.open(str(tmp_path / "whole" / "vol_labels.zarr"), mode="r")[:]
+    cells, seen = _morse_blocks._cells_of_ends, []
+
+    def interrupted(*args):          # Ctrl-C in the cells pass, after 5 of its 27 blocks
+        if len(seen) == 5:
+            raise KeyboardInterrupt
+        seen.append(1)
+        return cells(*args)
+
+    monkeypatch.setattr(_morse_blocks, "_cells_of_ends", interrupted)
+    out = tmp_path / "out"
+    assert main([*argv, "-o", str(out)]) != 0
+    work = out / ".vol.volseg-work"
+    assert len(list((work / "ends").glob("*.npy"))) == 27
+    assert len(list((work / "cells").glob("*.npz"))) == 5
+    monkeypatch.setattr(_morse_blocks, "_cells_of_ends", cells)
+    ascend, climbs = _morse_blocks._ascend, []
+    monkeypatch.setattr(_morse_blocks, "_ascend", lambda *a: climbs.append(1) or ascend(*a))
+    assert main([*argv, "-o", str(out)]) == 0
+    assert climbs == []                        # no block climbs again: its ends were kept
+    assert np.array_equal(zarr.open(str(out / "vol_labels.zarr"), mode="r")[:], expected)
+
+
 def test_a_killed_run_resumes_from_its_finished_blocks(tmp_path, volume, capsys, monkeypatch):
     from volseg import _morse_blocks
     from volseg.curvature import _grid_blocks
@@ -105,6 +136,7 @@ def test_a_killed_run_resumes_from_its_finished_blocks(tmp_path, volume, capsys,
     done = {stage: len(list((work / stage).glob("*.npz")))
             for stage in ("curvature", "cells", "pairs")}
     assert done["cells"] == 27 and done["pairs"] == 5 and done["curvature"] > 0
+    assert not (work / "ends").exists()        # the ascent's ends: gone once cells are stored
     monkeypatch.setattr(_morse_blocks, "_pairs_of_block", pairs)
 
     kernel, runs = _grid_blocks._Block.__call__, []

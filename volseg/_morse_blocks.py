@@ -27,6 +27,10 @@ its `cells` as a lazy Dask array; `segment` relabels block by block.
 
 from __future__ import annotations
 
+import os
+import shutil
+import threading
+
 import numpy as np
 
 from . import _morse_block_kernels as kernels
@@ -69,10 +73,13 @@ def _masked(field, mask):
     return np.where(mask, values, -np.inf)
 
 
-def _summary_of_block(halo, origin, shape, offsets, masked):
+def _summary_of_block(halo, origin, shape, offsets, masked, ends_file=None):
     """Stage 1: (maxima gids, their values, outer-layer gids, their path ends); the
-    outer layer's voxels outside the mask are left out (no path reaches them)."""
+    outer layer's voxels outside the mask are left out (no path reaches them).
+    `ends_file`: also keep every voxel's path end there (for `_cells_of_ends`)."""
     result, values = _ascend(halo, origin, shape, offsets, masked)
+    if ends_file is not None:
+        _save_atomically(ends_file, result)
     a, b, c = result.shape
     local = np.arange(result.size).reshape(result.shape)
     gids = ((origin[0] + local // (b * c)) * shape[1] + origin[1] + (local // c) % b) * shape[2] \
@@ -98,10 +105,24 @@ def _resolve(keys, ends):
     raise RuntimeError("blockwise Morse: path ends did not resolve (a bug)")
 
 
+def _save_atomically(path, array):
+    """np.save to `path` by way of a temporary file: a killed run leaves no partial file
+    (the ascent stage's summary is saved after this, so a finished summary implies
+    its ends)."""
+    temporary = f"{path}.{os.getpid()}.{threading.get_ident()}.tmp.npy"
+    np.save(temporary, array)
+    os.replace(temporary, path)
+
+
 def _cells_of_block(halo, origin, shape, offsets, masked, keys, ids):
     """Stage 3: the maximum id of every owned voxel, from the block's own table
     (`_block_tables`); -1 outside the mask."""
     result, _ = _ascend(halo, origin, shape, offsets, masked)
+    return _cells_of_ends(result, keys, ids)
+
+
+def _cells_of_ends(result, keys, ids):
+    """The cells of a block from its voxels' path ends (`ascend`'s result)."""
     cells = np.empty(result.size, dtype=ids.dtype)
     kernels.cells_of_ends(result.ravel(), keys, ids, cells)
     return cells.reshape(result.shape)
@@ -183,7 +204,7 @@ def _gather(blocks, compute, stage) -> list:
 
 
 def dask_descending_complex(field, connectivity="kuhn", mask=None, persist=None, wrap=None,
-                            compute=None, reread=False):
+                            compute=None, reread=False, ends_folder=None):
     """`descending_complex` of a 3-D Dask array (see the module docstring).
 
     `mask`: a boolean array (numpy or Dask) of the field's shape, as in memory
@@ -197,7 +218,10 @@ def dask_descending_complex(field, connectivity="kuhn", mask=None, persist=None,
     disk); `compute(*collections, stage=name)` replaces `dask.compute` (to show
     progress); `reread`: the field's blocks are cheap to make again (read from a
     store), so each is made again for its halo rather than kept waiting for it
-    (`volseg._halo`; the stored cells are always reread)."""
+    (`volseg._halo`; the stored cells are always reread); `ends_folder`: a folder
+    where the ascent pass keeps each block's path ends (8 bytes per voxel), so that
+    the cells pass reads them instead of climbing again from the halos (removed once
+    `persist` has stored the cells)."""
     import dask
     import dask.array as da
 
@@ -231,8 +255,15 @@ def dask_descending_complex(field, connectivity="kuhn", mask=None, persist=None,
     def origin(block_id):
         return np.array([starts[d][block_id[d]] for d in range(3)], dtype=np.int64)
 
+    def ends_file(block_id):
+        if ends_folder is None:
+            return None
+        return os.path.join(ends_folder, "_".join(map(str, block_id)) + ".npy")
+
+    if ends_folder is not None:
+        os.makedirs(ends_folder, exist_ok=True)
     summaries = _gather(_per_block(wrap("ascent", lambda h, block_id: _summary_of_block(
-        h, origin(block_id), shape, offsets, masked)), halo), compute,
+        h, origin(block_id), shape, offsets, masked, ends_file(block_id))), halo), compute,
         "Morse: steepest ascent per block")
     phases.done("blocks: steepest ascent, path compression")
     summaries = [list(s) for s in summaries]     # their columns dropped once joined
@@ -257,15 +288,29 @@ def dask_descending_complex(field, connectivity="kuhn", mask=None, persist=None,
     del summaries, layer_keys, layer_ends, maxima_sorted, maxima_ids
     tables = da.from_array(tables, chunks=1, name=False)
 
-    def cells_of(h, table, block_id=None):
-        return _cells_of_block(h, origin(block_id), shape, offsets, masked, *table.flat[0])
+    if ends_folder is None:      # climb again, from the halos
+        def cells_of(h, table, block_id=None):
+            return _cells_of_block(h, origin(block_id), shape, offsets, masked, *table.flat[0])
 
-    cells = halo.map_blocks(wrap("cells", cells_of), tables, dtype=index_type,
-                            chunks=values.chunks, meta=np.empty((0, 0, 0), index_type))
+        cells = halo.map_blocks(wrap("cells", cells_of), tables, dtype=index_type,
+                                chunks=values.chunks, meta=np.empty((0, 0, 0), index_type))
+    else:                        # the ends the ascent pass kept
+        def cells_of(table, block_id=None):
+            try:
+                ends = np.load(ends_file(block_id))
+            except OSError:
+                raise RuntimeError(f"block {block_id}'s path ends were expected in "
+                                   f"{ends_folder} but are not there") from None
+            return _cells_of_ends(ends, *table.flat[0])
+
+        cells = da.map_blocks(wrap("cells", cells_of), tables, dtype=index_type,
+                              chunks=values.chunks, meta=np.empty((0, 0, 0), index_type))
     del tables     # held by the cells' graph only: `persist` may free them (about 12 B/maximum)
     if persist is not None:
         cells = persist(cells)
         phases.done("blocks: cells (stored)")
+        if ends_folder is not None:    # every cell is stored: the ends are not read again
+            shutil.rmtree(ends_folder, ignore_errors=True)
     halo_cells = with_halo(cells, -1, fresh=persist is not None)
     pairs = _gather(_per_block(wrap("pairs", lambda h, c, block_id: _pairs_of_block(
         h, c, origin(block_id), shape, offsets)), halo, halo_cells), compute,

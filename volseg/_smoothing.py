@@ -32,7 +32,15 @@ def gaussian(data, sigma: float):
                                truncate=TRUNCATE)
     radius = int(TRUNCATE * float(sigma) + 0.5)
     chunks = data.chunks
-    out = data.astype(np.float64).map_overlap(
-        gaussian_filter, depth=radius, boundary="nearest", dtype=np.float64, sigma=sigma,
-        mode="nearest", truncate=TRUNCATE)
+    # The halos are cut from the input as it is (1 byte per voxel for uint8, not 8):
+    # each block becomes float64 inside the filter, the same values.
+    out = data.map_overlap(_filter, depth=radius, boundary="nearest", dtype=np.float64,
+                           sigma=sigma)
     return out if out.chunks == chunks else out.rechunk(chunks)
+
+
+def _filter(block, sigma):
+    from scipy.ndimage import gaussian_filter
+
+    return gaussian_filter(np.asarray(block, dtype=np.float64), sigma, mode="nearest",
+                           truncate=TRUNCATE)

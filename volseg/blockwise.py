@@ -6,13 +6,15 @@ before from disk instead: inside the output set's staging folder,
 
 0. the mask, if asked (`volseg.masks.foreground_mask` of the lazy input: a pass or
    two for its rule and its count; each Morse pass reads it again from the input);
-1. the value scale (one pass over the volume, after `smooth` if asked: min and max;
-   the smoothing is done again, block by block, where the curvature reads it);
+1. with `smooth`, the smoothed volume, block by block into the work folder below
+   (8 bytes per voxel on disk until the outputs are committed); then the value scale
+   (one pass over the volume, or the smoothed one: min and max);
 2. the curvature, block by block with its halo, written to ``<stem>_curvature.zarr``
    (float64, so that the Morse stage reads exactly what it would in memory);
-3. the Morse hierarchy from that store (`descending_complex` on Dask: three passes
-   over its blocks, the cells computed once into the work folder below, the cell
-   graph on this process);
+3. the Morse hierarchy from that store (`descending_complex` on Dask: two passes
+   over its blocks with their halos, the ascent's per-voxel path ends kept in the
+   work folder below until the cells are computed from them, once, the cell graph on
+   this process);
 4. the labels, block by block, written to ``<stem>_labels.zarr`` (and, for a volume
    of at most `volseg.outputs.BLOCKWISE_NIFTI_VOXELS`, labels and curvature to the
    in-memory path's NIfTI files, from the stores);
@@ -22,7 +24,8 @@ before from disk instead: inside the output set's staging folder,
 Nothing is ever whole in memory but the per-maximum data and the cell graph. The
 set is committed only when all of it is written (`volseg.io.OutputSet`).
 
-Every per-block result (curvature, ascent summaries, cells, edges) is also kept in
+Every per-block result (smoothed values, curvature, ascent summaries and path ends,
+cells, edges) is also kept in
 ``<out>/.<stem>.volseg-work`` (`volseg._resume.WorkFolder`, keyed by the inputs'
 checksum and every parameter) until the set is committed: a killed run, rerun with
 the same arguments, loads its finished blocks instead of computing them. The stages
@@ -57,8 +60,8 @@ def segment_to_zarr(volume, outputs, *, operator="weighted", n_regions=None, min
     `mask`: a `volseg.masks.foreground_mask` rule, resolved before anything is written
     (its passes over the input: the minimum and the count, or the histogram), its
     array read again from the input by each Morse pass.
-    `smooth`: Gaussian sigma in voxels, as `segment_volume`'s (computed block by block
-    in each pass that reads it: the value scale's and the curvature's).
+    `smooth`: Gaussian sigma in voxels, as `segment_volume`'s (computed block by block,
+    once, into the work folder).
     `engine`: a `volseg.engine.Engine` (entered), for its progress bars."""
     import dask
 
@@ -79,7 +82,6 @@ def segment_to_zarr(volume, outputs, *, operator="weighted", n_regions=None, min
     min_persistence, n_cut, auto = _cut_request(min_persistence, n_regions)
     data = _validate.lazy_volume_array(volume.data)
     smooth = _validate.smooth(smooth)
-    values = gaussian(data, smooth)
     spacing = volume.spacing
     frame = volume.frame or Frame.from_spacing(spacing)
     check_boundary(boundary)
@@ -98,40 +100,52 @@ def segment_to_zarr(volume, outputs, *, operator="weighted", n_regions=None, min
 
         timings = {}
         start = time.perf_counter()
-        scale = _validate.value_scale(default_value_scale(values, spacing)
-                                      if value_scale is None else value_scale)
+        # The key holds the value scale as asked: the default is a function of the
+        # input and `smooth`, both in the key.
         work = WorkFolder(outputs.folder / f".{outputs.stem}.volseg-work", {
             "volseg": __version__, "input": checksum, "shape": list(data.shape),
             "chunks": [list(c) for c in data.chunks], "spacing": list(spacing),
-            "operator": entry.name, "value_scale": scale, "boundary": boundary,
+            "operator": entry.name, "value_scale": value_scale, "boundary": boundary,
             "connectivity": "kuhn", "smooth": smooth, "mask": choice.used,
-            "block_layout": 2})   # 2: curvature blocks = input chunks
+            "block_layout": 3})   # 2: curvature blocks = input chunks; 3: ascent ends kept
+        stages = ("smoothed", "curvature", "ascent", "cells", "pairs")
         if work.resumed:
-            done = {stage: work.finished(stage)
-                    for stage in ("curvature", "ascent", "cells", "pairs")}
+            done = {stage: work.finished(stage) for stage in stages}
             say(f"{volume.name}: resuming from finished blocks in {work.folder} "
                 f"({', '.join(f'{stage} {n}' for stage, n in done.items())})")
+
+        def stored(blocks, stage, title):     # computed once into the work folder (each
+            if work.finished(stage) < blocks.npartitions:       # block saved by its wrap),
+                run(blocks.map_blocks(_nothing, dtype=bool,     # then read back from it
+                                      chunks=tuple((1,) * len(c) for c in blocks.chunks)),
+                    stage=title)
+            return work.array(stage, blocks.chunks, blocks.dtype)
+
+        values = gaussian(data, smooth)
+        if smooth:
+            # Smoothed once, into the work folder: the value scale and the curvature
+            # read it back, and the curvature's halos reread its blocks rather than
+            # keep them (dask cannot rerun a map_overlap graph's blocks on their own).
+            say(f"{volume.name}: smoothing, sigma {smooth:g} voxels, block by block")
+            values = stored(values.map_blocks(work.wrap("smoothed", _same), dtype=values.dtype),
+                            "smoothed", "smoothing")
+        scale = _validate.value_scale(default_value_scale(values, spacing)
+                                      if value_scale is None else value_scale)
         say(f"{volume.name}: curvature ({entry.name}) of a {'x'.join(map(str, data.shape))} volume "
             f"in {chunks} blocks")
-        # A smoothed input's blocks are not reread: dask (2026.8) fails to run a clone
-        # of a map_overlap graph ("Cannot fuse tasks with multiple outputs"); they wait
-        # in memory from their shells' pass to their halos', as Dask orders them.
         write_zarr(paths["curvature"], dask_grid_curvature(values, entry, spacing, scale, boundary,
-                                                           wrap=work.wrap, reread=not smooth),
+                                                           wrap=work.wrap, reread=True),
                    frame=frame, compute=lambda x: run(x, stage="curvature"))
         curvature = read_zarr(paths["curvature"]).data
         timings["curvature"] = time.perf_counter() - start
         start = time.perf_counter()
         say(f"{volume.name}: Morse complex, block by block")
 
-        def stored(cells):     # computed once into the work folder, read back from it by
-            run(cells.map_blocks(_nothing, dtype=bool,   # the edge and label passes (so the
-                                 chunks=tuple((1,) * len(c) for c in cells.chunks)),
-                stage="Morse: cells per block")      # cells' lookup tables are freed)
-            return work.array("cells", cells.chunks, cells.dtype)
-
-        hierarchy = dask_descending_complex(curvature, mask=choice.mask, persist=stored,
-                                            wrap=work.wrap, compute=run, reread=True)
+        # The cells are stored for the edge and label passes (so their tables are freed).
+        hierarchy = dask_descending_complex(curvature, mask=choice.mask, persist=lambda cells: (
+                                                stored(cells, "cells", "Morse: cells per block")),
+                                            wrap=work.wrap, compute=run, reread=True,
+                                            ends_folder=str(work.folder / "ends"))
         timings["morse"] = time.perf_counter() - start
         labels, k, threshold, cut = _cut(hierarchy, min_persistence, n_cut, auto, timings)
         start = time.perf_counter()
@@ -172,6 +186,11 @@ def segment_to_zarr(volume, outputs, *, operator="weighted", n_regions=None, min
     outputs.commit(write)
     result["work"].remove()      # committed: the finished blocks are no longer needed
     return result["info"]
+
+
+def _same(block, block_id=None):
+    """A block as it is (its wrap keeps it in the work folder)."""
+    return block
 
 
 def _nothing(block):
