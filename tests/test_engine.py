@@ -78,8 +78,10 @@ def test_work_folder_keeps_blocks_for_the_same_key_only(tmp_path):
     assert not other.resumed and other.finished("stage") == 0
 
 
-def test_a_run_killed_in_the_cells_pass_resumes_from_the_kept_path_ends(tmp_path, volume,
-                                                                        monkeypatch):
+def _whole_and_interrupted(tmp_path, volume, monkeypatch, stage_function):
+    """Segment `volume` blockwise (27 blocks) once whole, then again into ``out`` with
+    Ctrl-C in `_morse_blocks.<stage_function>` after 5 blocks; returns (argv, the whole
+    run's labels, out), with the function restored."""
     from volseg import _morse_blocks
 
     np.save(tmp_path / "vol.npy", volume)
@@ -87,21 +89,31 @@ def test_a_run_killed_in_the_cells_pass_resumes_from_the_kept_path_ends(tmp_path
             "--scheduler", "threads", "--workers", "1", "-q"]
     assert main([*argv, "-o", str(tmp_path / "whole")]) == 0
     expected = zarr.open(str(tmp_path / "whole" / "vol_labels.zarr"), mode="r")[:]
-    cells, seen = _morse_blocks._cells_of_ends, []
+    assert not (tmp_path / "whole" / ".vol.volseg-work").exists()     # removed once committed
+    original, seen = getattr(_morse_blocks, stage_function), []
 
-    def interrupted(*args):          # Ctrl-C in the cells pass, after 5 of its 27 blocks
+    def interrupted(*args):
         if len(seen) == 5:
             raise KeyboardInterrupt
         seen.append(1)
-        return cells(*args)
+        return original(*args)
 
-    monkeypatch.setattr(_morse_blocks, "_cells_of_ends", interrupted)
+    monkeypatch.setattr(_morse_blocks, stage_function, interrupted)
     out = tmp_path / "out"
     assert main([*argv, "-o", str(out)]) != 0
+    assert _visible(out) == []
+    monkeypatch.setattr(_morse_blocks, stage_function, original)
+    return argv, expected, out
+
+
+def test_a_run_killed_in_the_cells_pass_resumes_from_the_kept_path_ends(tmp_path, volume,
+                                                                        monkeypatch):
+    from volseg import _morse_blocks
+
+    argv, expected, out = _whole_and_interrupted(tmp_path, volume, monkeypatch, "_cells_of_ends")
     work = out / ".vol.volseg-work"
     assert len(list((work / "ends").glob("*.npy"))) == 27
     assert len(list((work / "cells").glob("*.npz"))) == 5
-    monkeypatch.setattr(_morse_blocks, "_cells_of_ends", cells)
     ascend, climbs = _morse_blocks._ascend, []
     monkeypatch.setattr(_morse_blocks, "_ascend", lambda *a: climbs.append(1) or ascend(*a))
     assert main([*argv, "-o", str(out)]) == 0
@@ -110,34 +122,15 @@ def test_a_run_killed_in_the_cells_pass_resumes_from_the_kept_path_ends(tmp_path
 
 
 def test_a_killed_run_resumes_from_its_finished_blocks(tmp_path, volume, capsys, monkeypatch):
-    from volseg import _morse_blocks
     from volseg.curvature import _grid_blocks
 
-    np.save(tmp_path / "vol.npy", volume)
-    argv = ["segment", str(tmp_path / "vol.npy"), "--chunks", "8", "--mask", "none",
-            "--scheduler", "threads", "--workers", "1", "-q"]
-    assert main([*argv, "-o", str(tmp_path / "whole")]) == 0
-    expected = zarr.open(str(tmp_path / "whole" / "vol_labels.zarr"), mode="r")[:]
-    assert not (tmp_path / "whole" / ".vol.volseg-work").exists()     # removed once committed
-
-    pairs, seen = _morse_blocks._pairs_of_block, []
-
-    def interrupted(*args):          # Ctrl-C in the edge pass, after 5 of its 27 blocks
-        if len(seen) == 5:
-            raise KeyboardInterrupt
-        seen.append(1)
-        return pairs(*args)
-
-    monkeypatch.setattr(_morse_blocks, "_pairs_of_block", interrupted)
-    out = tmp_path / "out"
-    assert main([*argv, "-o", str(out)]) != 0
+    # Ctrl-C in the edge pass, after 5 of its 27 blocks
+    argv, expected, out = _whole_and_interrupted(tmp_path, volume, monkeypatch, "_pairs_of_block")
     work = out / ".vol.volseg-work"
-    assert _visible(out) == []
     done = {stage: len(list((work / stage).glob("*.npz")))
             for stage in ("curvature", "cells", "pairs")}
     assert done["cells"] == 27 and done["pairs"] == 5 and done["curvature"] > 0
     assert not (work / "ends").exists()        # the ascent's ends: gone once cells are stored
-    monkeypatch.setattr(_morse_blocks, "_pairs_of_block", pairs)
 
     kernel, runs = _grid_blocks._Block.__call__, []
     monkeypatch.setattr(_grid_blocks._Block, "__call__",

@@ -10,8 +10,9 @@
 2. On the client: the outer-layer ends are resolved to maxima by pointer jumping
    (the chains follow strictly rising values, so they end), and the maxima are
    numbered by decreasing (value, index), as in memory.
-3. Per block again: cells = maximum id of each voxel (the ascent is recomputed rather
-   than kept, so no block-sized intermediate outlives its task).
+3. Per block again: cells = maximum id of each voxel, from the path ends the ascent
+   kept on disk (`ends_folder`, the blockwise pipeline's work folder), or, without
+   one, by climbing again (so no block-sized intermediate outlives its task).
 4. Per block, cells and values with a halo: the in-memory cross-edge pass on the
    block (every edge between two cells, seen from its smaller cell's voxel, with its
    lower end as saddle, reduced to the highest saddle per pair of cells), then the
