@@ -53,3 +53,24 @@ def test_persistence_curve_drawn_in_blocks_is_the_same_image(monkeypatch):
     for block in (1, 7, 1000):
         monkeypatch.setattr(preview, "_CURVE_BLOCK", block)
         assert np.array_equal(preview.persistence_panel(p, 2, 0.1, 30), whole)
+
+
+def test_a_lazy_preview_given_its_range_and_labels_is_the_same_image(tmp_path):
+    # The blockwise run passes what it knows (the input's range, k) instead of two
+    # passes over the volume and the labels: the picture must not change.
+    import dask.array as da
+
+    volume, curvature, labels = _case()
+    lazy = [da.from_array(a, chunks=(7, 9, 20)) for a in (volume, curvature, labels)]
+    persistence = (np.array([0.5, 0.1, 0.01]), 1, 0.05)
+    images = []
+    for name, arrays, known in (("eager", (volume, curvature, labels), {}), ("lazy", lazy, {}),
+                                ("given", lazy, {"value_range": (volume.min(), volume.max()),
+                                                 "n_labels": int(labels.max())})):
+        path = write_preview(tmp_path / f"{name}.png", *arrays, title="case",
+                             persistence=persistence, **known)
+        images.append(np.asarray(Image.open(path).convert("RGB")))
+    assert all(np.array_equal(image, images[0]) for image in images[1:])
+    other = write_preview(tmp_path / "other.png", *lazy, title="case", persistence=persistence,
+                          value_range=(volume.min(), 2 * volume.max()), n_labels=2)
+    assert not np.array_equal(np.asarray(Image.open(other).convert("RGB")), images[0])

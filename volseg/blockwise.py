@@ -121,6 +121,9 @@ def segment_to_zarr(volume, outputs, *, operator="weighted", n_regions=None, min
                     stage=title)
             return work.array(stage, blocks.chunks, blocks.dtype)
 
+        # The input's range, in one pass: the preview's grey scale and, unsmoothed, the
+        # value scale.
+        value_range = tuple(v.item() for v in run(data.min(), data.max(), stage="value range"))
         values = gaussian(data, smooth)
         if smooth:
             # Smoothed once, into the work folder: the value scale and the curvature
@@ -129,8 +132,9 @@ def segment_to_zarr(volume, outputs, *, operator="weighted", n_regions=None, min
             say(f"{volume.name}: smoothing, sigma {smooth:g} voxels, block by block")
             values = stored(values.map_blocks(work.wrap("smoothed", _same), dtype=values.dtype),
                             "smoothed", "smoothing")
-        scale = _validate.value_scale(default_value_scale(values, spacing)
-                                      if value_scale is None else value_scale)
+        scale = _validate.value_scale(value_scale if value_scale is not None else
+                                      default_value_scale(values, spacing, value_range=(
+                                          None if smooth else value_range)))
         say(f"{volume.name}: curvature ({entry.name}) of a {'x'.join(map(str, data.shape))} volume "
             f"in {chunks} blocks")
         write_zarr(paths["curvature"], dask_grid_curvature(values, entry, spacing, scale, boundary,
@@ -177,7 +181,8 @@ def segment_to_zarr(volume, outputs, *, operator="weighted", n_regions=None, min
         title = f"{volume.name}: {k} regions, {entry.name.replace('_', '-')} curvature"
         title += f", smoothed sigma {smooth:g}" if smooth else ""
         title += f", mask {choice.used} (blockwise)" if choice.mask is not None else " (blockwise)"
-        write_preview(paths["preview"], data, curvature, labels, title=title, persistence=curve)
+        write_preview(paths["preview"], data, curvature, labels, title=title, persistence=curve,
+                      value_range=value_range, n_labels=k)
         if "persistence" in paths:
             write_persistence_plot(paths["persistence"], *curve, k)
         paths["summary"].write_text(_json.dumps(info, indent=2))

@@ -102,15 +102,13 @@ def foreground_mask(volume, rule="auto") -> MaskChoice:
         return _checked(MaskChoice(mask, "array", "array", 0))
     name, threshold = check_rule(rule)
     if name in ("auto", "nonzero"):
-        mask = data > _compute(data.min())
-        if name == "auto":
-            # The minimum plateau is the complement of the mask (no NaN: the share of
-            # voxels equal to the minimum).
-            voxels = _count(mask)
-            if 1.0 - voxels / data.size <= AUTO_PLATEAU_SHARE:
-                return MaskChoice(None, "auto", "none", int(data.size))
-            return _checked(MaskChoice(mask, "auto", "nonzero", voxels))
-        return _checked(MaskChoice(mask, "nonzero", "nonzero", 0))
+        # The mask is the complement of the minimum plateau: one pass finds both.
+        lowest, at_lowest = _minimum_plateau(data, lazy)
+        mask = data > lowest
+        voxels = int(data.size - at_lowest) if lowest == lowest else 0    # NaN: none
+        if name == "auto" and 1.0 - voxels / data.size <= AUTO_PLATEAU_SHARE:
+            return MaskChoice(None, "auto", "none", int(data.size))
+        return _checked(MaskChoice(mask, name, "nonzero", voxels))
     if name == "otsu":
         threshold = _otsu(data)
         return _checked(MaskChoice(data > threshold, "otsu", f"value>{threshold:g}", 0))
@@ -145,6 +143,23 @@ def _compute(x):
     return x.compute() if hasattr(x, "compute") else x
 
 
+def _minimum_plateau(data, lazy: bool):
+    """The volume's minimum and how many voxels hold it; for a Dask volume in one pass
+    (each block's minimum and its count there, joined here)."""
+    if not lazy:
+        lowest = data.min()
+        return lowest, int(np.count_nonzero(data == lowest))
+    import dask
+
+    one = tuple((1,) * n for n in data.numblocks)
+    lows = data.map_blocks(lambda b: np.min(b, keepdims=True), chunks=one, dtype=data.dtype)
+    counts = data.map_blocks(lambda b: np.full((1, 1, 1), np.count_nonzero(b == b.min())),
+                             chunks=one, dtype=np.int64)
+    lows, counts = dask.compute(lows, counts)     # the blocks are read once for both
+    lowest = lows.min()
+    return lowest, int(counts[lows == lowest].sum())
+
+
 def _count(mask) -> int:
     return int(_compute(mask.sum()))
 
@@ -163,7 +178,9 @@ def _otsu(data) -> float:
     over [min, max]), so the same threshold."""
     from skimage.filters import threshold_otsu
 
-    if not hasattr(data, "compute"):
+    from ._validate import is_lazy
+
+    if not is_lazy(data):
         return float(threshold_otsu(data.ravel()))
     import dask
     import dask.array as da

@@ -202,7 +202,8 @@ def _colour_bar(canvas, draw, x, y, width, colours, ticks, label, font):
     draw.text((x + width // 2, y + 34), label, fill=_INK, font=font, anchor="ma")
 
 
-def write_preview(path, volume, curvature, labels, *, title="", persistence=None) -> Path:
+def write_preview(path, volume, curvature, labels, *, title="", persistence=None,
+                  value_range=None, n_labels=None) -> Path:
     """Mid slices along x, y, z: the volume, its curvature, the labels over the volume,
     and (given ``persistence=(event_persistence, n_components, threshold)``) the
     persistence curve below them.
@@ -211,6 +212,8 @@ def write_preview(path, volume, curvature, labels, *, title="", persistence=None
     (0, outside a mask, is left uncoloured); region colours cycle through the 20
     tab20 colours; the legend names the first ten. The curvature colour scale is
     +-(99th percentile of |H| over the slices shown).
+    `value_range` (the volume's min and max) and `n_labels` (the largest label), when
+    the caller knows them, spare a lazy volume's passes over the volume and the labels.
     """
     from PIL import Image, ImageDraw
 
@@ -224,15 +227,18 @@ def write_preview(path, volume, curvature, labels, *, title="", persistence=None
     sliced = [[np.asarray(a[index]) for index in indices] for a in (volume, curvature, labels)]
     from ._validate import is_lazy
 
-    if is_lazy(volume):
+    lazy = is_lazy(volume)
+    if not lazy:
+        volume, labels = np.asarray(volume), np.asarray(labels)
+    wanted = ([] if value_range is not None else [volume.min(), volume.max()]) + (
+        [] if n_labels is not None else [labels.max() if labels.size else 0])
+    if lazy:         # one pass over the volume and the labels for what is not given
         import dask
 
-        lo, hi, k = (float(v) for v in dask.compute(volume.min(), volume.max(), labels.max()))
-        k = int(k)
-    else:
-        volume, labels = np.asarray(volume), np.asarray(labels)
-        k = int(labels.max()) if labels.size else 0
-        lo, hi = float(volume.min()), float(volume.max())
+        wanted = dask.compute(*wanted)
+    found = [float(v) for v in wanted]
+    lo, hi = (float(v) for v in (value_range if value_range is not None else found[:2]))
+    k = int(n_labels if n_labels is not None else found[-1])
     mids = sliced[1]
     limit = float(np.percentile(np.abs(np.concatenate([m.ravel() for m in mids])), 99)) or 1.0
 

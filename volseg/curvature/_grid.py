@@ -62,7 +62,8 @@ def _kernel_tables(h):
     return (_OFFSETS, _PATH_IDX, _AXES, cross2)
 
 
-def default_value_scale(volume: ArrayLike, spacing=(1.0, 1.0, 1.0)) -> float:
+def default_value_scale(volume: ArrayLike, spacing=(1.0, 1.0, 1.0), *,
+                        value_range=None) -> float:
     """The value scale s that makes a volume's graph as tall as it is wide.
 
     ``s = L / (max f - min f)`` with L the longest side of the grid in spacing
@@ -71,8 +72,13 @@ def default_value_scale(volume: ArrayLike, spacing=(1.0, 1.0, 1.0)) -> float:
     units of the data (scaling f by c leaves the result unchanged), and it stays in
     the non-linear regime where it differs from a plain Laplacian (tiny s makes
     H -> -Laplacian(f) s / 3). A constant volume gets s = 1.
+    `value_range`: (min f, max f) when the caller has them already (no pass over the
+    volume then).
     """
-    if _validate.is_lazy(volume):   # one pass over the blocks for both statistics
+    if value_range is not None:
+        lo, hi = (float(v) for v in value_range)
+        data = volume
+    elif _validate.is_lazy(volume):   # one pass over the blocks for both statistics
         import dask
 
         lo, hi = (float(v) for v in dask.compute(volume.min(), volume.max()))
