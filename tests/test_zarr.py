@@ -186,3 +186,35 @@ def test_cli_blockwise_refuses_a_corrupt_chunk(tmp_path, volume, capsys):
     err = capsys.readouterr().err
     assert "unreadable" in err and err.count("\n") == 1
     assert not [p for p in os.listdir(tmp_path / "o2") if not p.startswith(".")]
+
+
+def test_cli_blockwise_checks_the_free_disk_first(tmp_path, volume, capsys, monkeypatch):
+    import shutil
+
+    write_zarr(tmp_path / "vol.zarr", volume, chunks=(10, 9, 7))
+    out = tmp_path / "out"
+    out.mkdir()
+    real = shutil.disk_usage
+    need = volume.size * 20       # curvature 8, path ends 8, cells 4 bytes per voxel
+
+    def free(n):
+        monkeypatch.setattr(shutil, "disk_usage", lambda path: real(path)._replace(free=n))
+
+    free(need - 1)
+    assert main(["segment", str(tmp_path / "vol.zarr"), "-o", str(out), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert "GB free, but the blockwise run's work folder needs" in err and err.count("\n") == 1
+    assert os.listdir(out) == []                       # nothing written, not even the work folder
+    free(need - 1 + volume.size * 8)
+    assert main(["segment", str(tmp_path / "vol.zarr"), "-o", str(out), "--smooth", "1"]) == 2
+    assert "smoothed values 8" in capsys.readouterr().err
+    # An earlier run's work folder counts as free (it is reused or emptied).
+    (out / ".vol.volseg-work").mkdir()
+    (out / ".vol.volseg-work" / "left.npz").write_bytes(b"x" * 1000)
+    free(need - 1000)
+    assert main(["segment", str(tmp_path / "vol.zarr"), "-o", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert "warning" in err and "GB free; the run may need up to" in err   # outputs may not fit
+    assert sorted(p for p in os.listdir(out) if not p.startswith(".")) == [
+        "vol_curvature.nii.gz", "vol_curvature.zarr", "vol_labels.nii.gz", "vol_labels.zarr",
+        "vol_preview.png", "vol_summary.json"]

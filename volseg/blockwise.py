@@ -4,11 +4,13 @@
 that reads the curvature would compute it again. Here each stage reads the one
 before from disk instead: inside the output set's staging folder,
 
-0. the mask, if asked (`volseg.masks.foreground_mask` of the lazy input: a pass or
-   two for its rule and its count; each Morse pass reads it again from the input);
-1. with `smooth`, the smoothed volume, block by block into the work folder below
-   (8 bytes per voxel on disk until the outputs are committed); then the value scale
-   (one pass over the volume, or the smoothed one: min and max);
+0. the mask, if asked (`volseg.masks.foreground_mask` of the lazy input: one pass
+   for auto and nonzero, two for otsu; each Morse pass reads it again from the
+   input); then the free disk is checked (`DISK_BYTES_PER_VOXEL`);
+1. the input's min and max (one pass: the value scale and the preview's grey scale);
+   with `smooth`, the smoothed volume, block by block into the work folder below
+   (8 bytes per voxel on disk until the outputs are committed), and its own min and
+   max for the value scale;
 2. the curvature, block by block with its halo, written to ``<stem>_curvature.zarr``
    (float64, so that the Morse stage reads exactly what it would in memory);
 3. the Morse hierarchy from that store (`descending_complex` on Dask: two passes
@@ -36,6 +38,8 @@ Dask's current scheduler.
 
 from __future__ import annotations
 
+import os
+import shutil
 import time
 from concurrent.futures import ThreadPoolExecutor
 
@@ -49,6 +53,13 @@ DEFAULT_CHUNKS = 128
 # Peak memory of the in-memory `volseg segment` per voxel, measured end to end on a
 # smooth uint8 field (4.98 GB at 512^3: 37 B), rounded up.
 IN_MEMORY_BYTES_PER_VOXEL = 40
+# Disk a blockwise run holds at once, bytes per voxel (its blocks are stored
+# uncompressed): the work folder's curvature 8, path ends 8 and cells 4 at the end of
+# the cells pass, plus 8 of smoothed values with `smooth`; the outputs' compressed
+# curvature (5.1 measured at 512^3, at most 8) and labels (at most 2) come on top.
+# Less free disk than the work folder needs refuses the run before it starts; less
+# than both, a warning.
+DISK_BYTES_PER_VOXEL = {"work": 20, "smoothed": 8, "outputs": 10}
 
 
 def segment_to_zarr(volume, outputs, *, operator="weighted", n_regions=None, min_persistence=None,
@@ -92,6 +103,8 @@ def segment_to_zarr(volume, outputs, *, operator="weighted", n_regions=None, min
     if mask not in (None, "none"):
         say(f"{volume.name}: mask {mask}")
     choice = foreground_mask(data, mask)     # of the values as read, as in memory
+    work_folder = outputs.folder / f".{outputs.stem}.volseg-work"
+    _check_disk(outputs.folder, work_folder, data.size, smooth, say)
     result = {}
 
     def write(paths):
@@ -102,7 +115,7 @@ def segment_to_zarr(volume, outputs, *, operator="weighted", n_regions=None, min
         start = time.perf_counter()
         # The key holds the value scale as asked: the default is a function of the
         # input and `smooth`, both in the key.
-        work = WorkFolder(outputs.folder / f".{outputs.stem}.volseg-work", {
+        work = WorkFolder(work_folder, {
             "volseg": __version__, "input": checksum, "shape": list(data.shape),
             "chunks": [list(c) for c in data.chunks], "spacing": list(spacing),
             "operator": entry.name, "value_scale": value_scale, "boundary": boundary,
@@ -191,6 +204,32 @@ def segment_to_zarr(volume, outputs, *, operator="weighted", n_regions=None, min
     outputs.commit(write)
     result["work"].remove()      # committed: the finished blocks are no longer needed
     return result["info"]
+
+
+def _check_disk(folder, work_folder, voxels: int, smooth: float, say):
+    """Refuse a run whose work folder cannot fit on `folder`'s disk (an OutputError
+    naming both sizes, before anything is written); warn when the outputs may not fit
+    beside it. A work folder left by an earlier run counts as free: it is either
+    reused or emptied."""
+    from .io import OutputError
+
+    per_voxel = DISK_BYTES_PER_VOXEL
+    least = voxels * (per_voxel["work"] + (per_voxel["smoothed"] if smooth else 0))
+    most = least + voxels * per_voxel["outputs"]
+    free = shutil.disk_usage(folder).free + sum(
+        os.path.getsize(os.path.join(top, name))
+        for top, _, names in os.walk(work_folder) for name in names)
+    gb = 1e9
+    if free < least:
+        raise OutputError(
+            f"{folder}: {free / gb:.3g} GB free, but the blockwise run's work folder needs "
+            f"{least / gb:.3g} GB ({least // voxels} bytes per voxel: curvature 8, path ends 8, "
+            f"cells 4{', smoothed values 8' if smooth else ''}); free some space or write the "
+            "outputs elsewhere (-o)")
+    if free < most:
+        say(f"warning: {folder}: {free / gb:.3g} GB free; the run may need up to "
+            f"{most / gb:.3g} GB (work folder {least / gb:.3g} GB, outputs up to "
+            f"{(most - least) / gb:.3g} GB)")
 
 
 def _same(block, block_id=None):
