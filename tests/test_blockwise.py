@@ -227,10 +227,11 @@ def test_mask_rules_of_a_dask_volume_equal_in_memory(dtype):
     from volseg.masks import foreground_mask
 
     rng = np.random.default_rng(5)
-    volume = (rng.gamma(2.0, 30.0, (23, 31, 17)) - (50 if dtype == np.int16 else 0)).astype(dtype)
-    # A plateau over rows :20 (auto masks), then over rows :10 only (the blocks of rows
-    # 16.. do not hold the minimum: the one-pass count must skip their minima).
-    for rows in (20, 10):
+    noise = (rng.gamma(2.0, 30.0, (23, 31, 17)) - (50 if dtype == np.int16 else 0)).astype(dtype)
+    # A plateau over rows :10 only (the blocks of rows 16.. do not hold the minimum:
+    # the one-pass count must skip their minima), then over rows :20 (auto masks).
+    for rows in (10, 20):
+        volume = noise.copy()
         volume[:, :rows] = volume.min()
         lazy = da.from_array(volume, chunks=(7, 16, 5))
         for rule in ("auto", "otsu", "nonzero", "value>40", "value<=3", "none", volume > 60):
