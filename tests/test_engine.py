@@ -78,6 +78,23 @@ def test_work_folder_keeps_blocks_for_the_same_key_only(tmp_path):
     assert not other.resumed and other.finished("stage") == 0
 
 
+def test_a_block_killed_while_written_does_not_count_as_finished(tmp_path, monkeypatch):
+    # Killed after the temporary file is written, before its rename: no block looks
+    # finished (the count decides whether a stored stage is computed again).
+    import volseg._resume as resume
+
+    work = WorkFolder(tmp_path / "w", {"input": "abc"})
+
+    def killed(*args):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(resume.os, "replace", killed)
+    with pytest.raises(KeyboardInterrupt):
+        work.wrap("stage", lambda x, block_id=None: x * 2)(np.arange(3), block_id=(0, 0, 0))
+    assert len(list((work.folder / "stage").iterdir())) == 1       # the leftover
+    assert work.finished("stage") == 0
+
+
 def _whole_and_interrupted(tmp_path, volume, monkeypatch, stage_function):
     """Segment `volume` blockwise (27 blocks) once whole, then again into ``out`` with
     Ctrl-C in `_morse_blocks.<stage_function>` after 5 blocks; returns (argv, the whole

@@ -23,13 +23,10 @@ TRUNCATE = 4.0
 def gaussian(data, sigma: float):
     """`data` (numpy or Dask, any dimension) smoothed by a Gaussian of `sigma` voxels,
     as float64; `sigma` 0 returns it unchanged."""
-    from scipy.ndimage import gaussian_filter
-
     if not sigma:
         return data
     if not hasattr(data, "map_overlap"):
-        return gaussian_filter(np.asarray(data, dtype=np.float64), sigma, mode="nearest",
-                               truncate=TRUNCATE)
+        return _filter(data, sigma)
     radius = int(TRUNCATE * float(sigma) + 0.5)
     chunks = data.chunks
     # The halos are cut from the input as it is (1 byte per voxel for uint8, not 8):
@@ -40,6 +37,8 @@ def gaussian(data, sigma: float):
 
 
 def _filter(block, sigma):
+    """scipy's `gaussian_filter` of the float64 values, 'nearest' at the edges (the
+    whole volume in memory, or a block with its halo)."""
     from scipy.ndimage import gaussian_filter
 
     return gaussian_filter(np.asarray(block, dtype=np.float64), sigma, mode="nearest",
