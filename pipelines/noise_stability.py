@@ -35,9 +35,9 @@ from pathlib import Path
 
 import numpy as np
 
-from volseg.cli import UsageError
-from volseg.segment import DEFAULT_REGIONS
+from volseg.errors import UsageError
 from volseg.curvature import REGISTRY, cli_choices, normalize_operator
+from volseg.segment import DEFAULT_REGIONS
 
 from ._output import save_figure, write_csv
 from .store import ResultStore
@@ -203,9 +203,9 @@ def _store(out_dir):
 
 
 def _engine(scheduler, workers):
-    """The run's `volseg.engine.Engine`, entered: a LocalCluster of single-threaded
+    """The run's `volseg.blockwise.engine.Engine`, entered: a LocalCluster of single-threaded
     worker processes (one per core) or the running scheduler at `scheduler`."""
-    from volseg.engine import Engine, EngineError
+    from volseg.blockwise.engine import Engine, EngineError
 
     try:
         return Engine(scheduler or "local", workers=workers).__enter__()

@@ -34,9 +34,9 @@ def _synchronous():
     ("laplace_beltrami", "mirror"), ("intrinsic", "linear")])
 def test_blockwise_curvature_equals_in_memory(volume, operator, boundary):
     spacing = (1.0, 0.7, 1.3)
-    reference = grid_curvature(volume, operator, boundary=boundary, spacing=spacing)
+    reference = grid_curvature(volume, operator, padding=boundary, spacing=spacing)
     for chunks in CHUNKINGS[:3]:
-        lazy = grid_curvature(da.from_array(volume, chunks=chunks), operator, boundary=boundary,
+        lazy = grid_curvature(da.from_array(volume, chunks=chunks), operator, padding=boundary,
                               spacing=spacing)
         assert isinstance(lazy, da.Array) and lazy.chunks == da.from_array(volume, chunks=chunks).chunks
         # Bit-identical: each block adds its sums in the in-memory order.
@@ -198,11 +198,11 @@ def test_segment_volume_of_a_dask_array_with_smoothing_equals_in_memory():
 
     rng = np.random.default_rng(5)
     volume = quantized(smooth_random_field((26, 30, 21), rng, sigma=1.5), 0.1)   # 8-bit-like
-    eager = segment_volume(volume, n_regions=7, smooth=1.2)
-    lazy = segment_volume(da.from_array(volume, chunks=(9, 2, 13)), n_regions=7, smooth=1.2)
+    eager = segment_volume(volume, n_regions=7, smooth_sigma=1.2)
+    lazy = segment_volume(da.from_array(volume, chunks=(9, 2, 13)), n_regions=7, smooth_sigma=1.2)
     assert np.array_equal(lazy.curvature.compute(), eager.curvature)
     assert np.array_equal(lazy.labels.compute(), eager.labels)
-    assert lazy.smooth == eager.smooth == 1.2 and lazy.value_scale == eager.value_scale
+    assert lazy.smooth_sigma == eager.smooth_sigma == 1.2 and lazy.value_scale == eager.value_scale
     unsmoothed = segment_volume(volume, n_regions=7)
     assert not np.array_equal(unsmoothed.curvature, eager.curvature)     # the option is used
 

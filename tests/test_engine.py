@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 import zarr
 
-from volseg import engine as engine_module
-from volseg._resume import WorkFolder
+from volseg.blockwise import engine as engine_module
+from volseg.blockwise._resume import WorkFolder
 from volseg.cli import main
 from volseg.io import read_volume
 
@@ -80,15 +80,17 @@ def test_work_folder_keeps_blocks_for_the_same_key_only(tmp_path):
 
 def test_a_block_killed_while_written_does_not_count_as_finished(tmp_path, monkeypatch):
     # Killed after the temporary file is written, before its rename: no block looks
-    # finished (the count decides whether a stored stage is computed again).
-    import volseg._resume as resume
+    # finished (the count decides whether a stored stage is computed again). A kill
+    # runs no clean-up: the temporary's removal is disabled too.
+    import volseg._atomic as atomic
 
     work = WorkFolder(tmp_path / "w", {"input": "abc"})
 
     def killed(*args):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(resume.os, "replace", killed)
+    monkeypatch.setattr(atomic.os, "replace", killed)
+    monkeypatch.setattr(atomic.os, "unlink", lambda path: None)
     with pytest.raises(KeyboardInterrupt):
         work.wrap("stage", lambda x, block_id=None: x * 2)(np.arange(3), block_id=(0, 0, 0))
     assert len(list((work.folder / "stage").iterdir())) == 1       # the leftover
@@ -99,7 +101,7 @@ def _whole_and_interrupted(tmp_path, volume, monkeypatch, stage_function):
     """Segment `volume` blockwise (27 blocks) once whole, then again into ``out`` with
     Ctrl-C in `_morse_blocks.<stage_function>` after 5 blocks; returns (argv, the whole
     run's labels, out), with the function restored."""
-    from volseg import _morse_blocks
+    from volseg.morse import _blocks as _morse_blocks
 
     np.save(tmp_path / "vol.npy", volume)
     argv = ["segment", str(tmp_path / "vol.npy"), "--chunks", "8", "--mask", "none",
@@ -125,7 +127,7 @@ def _whole_and_interrupted(tmp_path, volume, monkeypatch, stage_function):
 
 def test_a_run_killed_in_the_cells_pass_resumes_from_the_kept_path_ends(tmp_path, volume,
                                                                         monkeypatch):
-    from volseg import _morse_blocks
+    from volseg.morse import _blocks as _morse_blocks
 
     argv, expected, out = _whole_and_interrupted(tmp_path, volume, monkeypatch, "_cells_of_ends")
     work = out / ".vol.volseg-work"
@@ -176,7 +178,7 @@ def test_no_worker_holds_more_than_a_few_blocks_and_the_shells(tmp_path):
     from distributed import Client, LocalCluster
     from distributed.diagnostics.plugin import SchedulerPlugin
 
-    from volseg.blockwise import segment_to_zarr
+    from volseg.files import segment_to_files
     from volseg.io import OutputSet, Volume
     from volseg.outputs import output_names
 
@@ -198,7 +200,7 @@ def test_no_worker_holds_more_than_a_few_blocks_and_the_shells(tmp_path):
         cluster.scheduler.add_plugin(peak)
         # (No NIfTI outputs: those of a small volume are read whole from the stores.)
         with OutputSet(tmp_path / "o", "big", output_names("big", False, True)) as outputs:
-            info = segment_to_zarr(Volume(lazy.data, frame=lazy.frame, name="big"), outputs)
+            info = segment_to_files(Volume(lazy.data, frame=lazy.frame, name="big"), outputs)
     halo_block = 14**3 * 8
     shells = 27 * 6 * 12**2 * (8 + 4)
     assert info["n_regions"] >= 1 and peak.peak > 0

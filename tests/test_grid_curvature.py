@@ -24,7 +24,7 @@ def test_grid_equals_explicit_mesh_at_interior_voxels(operator, spacing, scale, 
 @pytest.mark.parametrize("boundary", ["linear", "mirror"])
 def test_every_voxel_is_finite(operator, boundary, rng):
     f = smooth_random_field((6, 7, 5), rng)
-    assert np.isfinite(grid_curvature(f, operator, boundary=boundary)).all()
+    assert np.isfinite(grid_curvature(f, operator, padding=boundary)).all()
 
 
 @pytest.mark.parametrize("operator", ALL)
@@ -39,8 +39,8 @@ def test_mirror_padding_treats_the_boundary_as_a_symmetry_plane():
     # the full field's values on the cut plane.
     x, y, z = np.meshgrid(np.arange(-6.0, 7), np.arange(7.0), np.arange(7.0), indexing="ij")
     f = np.exp(-0.05 * (x**2 + (y - 3) ** 2 + (z - 3) ** 2))
-    full = grid_curvature(f, spacing=(1, 1, 1), value_scale=4.0, boundary="mirror")
-    half = grid_curvature(f[6:], spacing=(1, 1, 1), value_scale=4.0, boundary="mirror")
+    full = grid_curvature(f, spacing=(1, 1, 1), value_scale=4.0, padding="mirror")
+    half = grid_curvature(f[6:], spacing=(1, 1, 1), value_scale=4.0, padding="mirror")
     # Not identical: the Kuhn split is not mirror-symmetric. Close on the cut plane.
     assert_allclose(half[0, 1:-1, 1:-1], full[6, 1:-1, 1:-1], rtol=0.15, atol=0.01)
 
@@ -75,8 +75,8 @@ def test_grid_errors():
         grid_curvature(np.zeros((3, 3, 3)), spacing=(1, 0, 1))
     with pytest.raises(ValueError, match="`value_scale` must be a positive"):
         grid_curvature(np.zeros((3, 3, 3)), value_scale=-1)
-    with pytest.raises(ValueError, match="unknown `boundary`"):
-        grid_curvature(np.zeros((3, 3, 3)), boundary="wrap")
+    with pytest.raises(ValueError, match="unknown `padding`"):
+        grid_curvature(np.zeros((3, 3, 3)), padding="wrap")
 
 
 def test_the_generated_stencil_is_what_the_tables_give():

@@ -3,8 +3,8 @@ read as a valid finite 3-D volume, within 2 s (hypothesis' deadline) and 256 MB 
 new peak memory per file."""
 
 import gzip
-import os
 import io as _bytes_io
+import os
 import resource
 
 import nibabel

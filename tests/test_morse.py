@@ -148,40 +148,6 @@ def test_bad_input_is_a_clear_error():
         descending_complex(np.array(["a", "b"]))
 
 
-def test_morse_imports_only_its_kernels_and_the_kuhn_leaf():
-    """morse stays usable on its own: of volseg it imports only `_morse_kernels`, `_kuhn`
-    and its blockwise half `_morse_blocks` (which imports only morse, the kernels and
-    `_halo`); the kernels, `_halo` and `_kuhn` import nothing of volseg themselves."""
-    import ast
-    import inspect
-
-    import volseg._morse_blocks as blocks
-    import volseg.morse as morse
-
-    family = {"morse", "_morse_kernels", "_kuhn", "_morse_blocks", "_morse_block_kernels",
-              "_halo"}
-    for module, allowed in ((morse, (["_morse_kernels"], ["_kuhn"], ["dask_descending_complex"])),
-                            (blocks, None)):
-        for node in ast.walk(ast.parse(inspect.getsource(module))):
-            if isinstance(node, ast.ImportFrom) and node.level:
-                names = [a.name for a in node.names]
-                if allowed is not None:
-                    assert names in allowed, ast.dump(node)
-                    assert node.module in (None, "_morse_blocks"), ast.dump(node)
-                else:
-                    assert (node.module or "") in family or set(names) <= family, ast.dump(node)
-            if isinstance(node, ast.Import):
-                assert not any(a.name.startswith("volseg") for a in node.names)
-    import volseg._kuhn as kuhn
-    import volseg._halo as halo
-    import volseg._morse_block_kernels as block_kernels
-    import volseg._morse_kernels as kernels
-
-    for leaf in (kuhn, kernels, block_kernels, halo):
-        for node in ast.walk(ast.parse(inspect.getsource(leaf))):
-            assert not (isinstance(node, ast.ImportFrom) and node.level), ast.dump(node)
-
-
 def _reference_persistence(values, edges):
     """Elder-rule vertex sweep in plain Python: sorted (birth - death) of dying maxima."""
     n = len(values)
@@ -346,7 +312,7 @@ def test_events_do_not_depend_on_how_edges_were_found(rng):
     merges first decides the events' targets. The order is by (value, vertex, cell
     pair), so the same hierarchy comes out of any chunking (the blockwise path needs
     this) and of the reversed field, up to the index map."""
-    from volseg import morse
+    from volseg.morse import _edges as morse
 
     field = rng.integers(0, 4, (23, 19, 21)).astype(float)  # many ties
     expected = descending_complex(field)
@@ -364,7 +330,7 @@ def test_events_do_not_depend_on_how_edges_were_found(rng):
 def test_region_count_cut_keeps_the_events_a_full_sort_would():
     # `_all_but_most_persistent` selects in linear time what np.lexsort((young, -p))
     # ranks first: the most persistent events, ties to the older young maximum.
-    from volseg.morse import _all_but_most_persistent
+    from volseg.morse._hierarchy import _all_but_most_persistent
 
     rng = np.random.default_rng(0)
     for _ in range(200):

@@ -1,9 +1,9 @@
-"""volseg.preview, directly: the picture, the label convention, the persistence plot."""
+"""volseg.outputs.preview, directly: the picture, the label convention, the persistence plot."""
 
 import numpy as np
 from PIL import Image
 
-from volseg.preview import write_persistence_plot, write_preview
+from volseg.outputs.preview import write_persistence_plot, write_preview
 
 
 def _case():
@@ -44,7 +44,7 @@ def test_persistence_plot_alone(tmp_path):
 def test_persistence_curve_drawn_in_blocks_is_the_same_image(monkeypatch):
     # The curve's corners are made a block of events at a time (memory): the seams
     # between blocks must not change a pixel (ties, zeros and a wide range included).
-    import volseg.preview as preview
+    import volseg.outputs.preview as preview
 
     rng = np.random.default_rng(3)
     p = rng.lognormal(-3, 2, 5000)

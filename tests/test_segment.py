@@ -100,16 +100,16 @@ def test_mask_rules():
 def test_smooth_zero_is_bit_identical_and_smoothing_removes_the_checkerboard():
     data = demo_volume(32)
     plain = segment_volume(data)
-    np.testing.assert_array_equal(segment_volume(data, smooth=0).curvature, plain.curvature)
-    smoothed = segment_volume(data, smooth=1.0)
+    np.testing.assert_array_equal(segment_volume(data, smooth_sigma=0).curvature, plain.curvature)
+    smoothed = segment_volume(data, smooth_sigma=1.0)
 
     def total_variation(h):
         return sum(np.abs(np.diff(h, axis=a)).sum() for a in range(3)) / np.abs(h).sum()
 
     # 8-bit steps make the curvature flicker from voxel to voxel; sigma 1 calms it.
     assert total_variation(smoothed.curvature) < 0.5 * total_variation(plain.curvature)
-    with pytest.raises(ValueError, match="`smooth` must be a non-negative number"):
-        segment_volume(data, smooth=-1)
+    with pytest.raises(ValueError, match="`smooth_sigma` must be a non-negative number"):
+        segment_volume(data, smooth_sigma=-1)
 
 
 def test_regions_auto_picks_the_largest_gap_in_the_papers_range():

@@ -39,7 +39,7 @@ def test_segment_mesh_on_a_sphere_and_on_a_bumpy_sphere():
     direction = vertices / np.linalg.norm(vertices, axis=1, keepdims=True)
     bump = 1 + 0.3 * (np.exp(-8 * ((direction - [0, 0, 1]) ** 2).sum(1))
                       + np.exp(-8 * ((direction + [0, 0, 1]) ** 2).sum(1)))
-    result = segment_mesh(direction * bump[:, None], triangles, n_regions=2, smooth=3)
+    result = segment_mesh(direction * bump[:, None], triangles, n_regions=2, smooth_rounds=3)
     top, bottom = np.argmax(direction[:, 2]), np.argmin(direction[:, 2])
     assert result.n_regions == 2 and result.labels[top] != result.labels[bottom]
     table = result.region_table()

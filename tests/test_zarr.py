@@ -112,9 +112,9 @@ def test_cli_zarr_in_zarr_out_equals_in_memory(tmp_path, volume, capsys):
 
 
 def test_cli_blockwise_writes_no_nifti_above_its_size_limit(tmp_path, volume, monkeypatch):
-    import volseg.outputs
+    import volseg.outputs._summary as names
 
-    monkeypatch.setattr(volseg.outputs, "BLOCKWISE_NIFTI_VOXELS", volume.size - 1)
+    monkeypatch.setattr(names, "BLOCKWISE_NIFTI_VOXELS", volume.size - 1)
     write_zarr(tmp_path / "vol.zarr", volume, chunks=(10, 9, 7))
     assert main(["segment", str(tmp_path / "vol.zarr"), "-o", str(tmp_path / "z"), "-q"]) == 0
     assert sorted(os.listdir(tmp_path / "z")) == [

@@ -1,4 +1,4 @@
-"""Gaussian pre-smoothing of a volume (`segment_volume(smooth=sigma)`), for numpy and
+"""Gaussian pre-smoothing of a volume (`segment_volume(smooth_sigma=sigma)`), for numpy and
 Dask arrays alike.
 
 In memory it is scipy's `gaussian_filter` of the float64 values, 'nearest' at the

@@ -3,7 +3,7 @@
 import numba
 import numpy as np
 
-from ._morse_kernels import find_root
+from ._union_find import find_root
 
 
 @numba.njit(cache=True, nogil=True)

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["volume_array", "spacing", "value_scale", "smooth"]
+__all__ = ["volume_array", "spacing", "value_scale", "smooth", "rounds", "is_lazy"]
 
 # Cut parameters (n_regions, min_persistence) are checked by volseg.morse.check_cut,
 # which owns them: the Morse stage stands alone.
@@ -84,12 +84,24 @@ def value_scale(value) -> float:
     return number(value, "value_scale", positive=True)
 
 
+def rounds(value, name: str) -> int:
+    """A number of rounds: a non-negative whole number (2.0 is taken; 2.5, a bool, a
+    string or a negative number is refused, naming `name`)."""
+    import numbers
+
+    whole = (isinstance(value, numbers.Real) and not isinstance(value, bool)
+             and np.isfinite(value) and value == int(value) and value >= 0)
+    if not whole:
+        raise ValueError(f"`{name}` must be a whole number of rounds >= 0, got {value!r}")
+    return int(value)
+
+
 def smooth(value) -> float:
     """A Gaussian pre-smoothing sigma in voxels: a non-negative finite number."""
     try:
         sigma = float(value)
     except (TypeError, ValueError):
-        raise ValueError(f"`smooth` must be a number of voxels, got {value!r}") from None
+        raise ValueError(f"`smooth_sigma` must be a number of voxels, got {value!r}") from None
     if not (np.isfinite(sigma) and sigma >= 0):
-        raise ValueError(f"`smooth` must be a non-negative number of voxels, got {value!r}")
+        raise ValueError(f"`smooth_sigma` must be a non-negative number of voxels, got {value!r}")
     return sigma

@@ -9,21 +9,17 @@ import argparse
 import os
 import signal
 import sys
-import time
-from contextlib import ExitStack
 from pathlib import Path
 
 import numpy as np
 
 from . import _json
-from .engine import MEMORY_SHARE
+from ._validate import is_lazy
 from ._version import __version__
+from .blockwise.engine import MEMORY_SHARE
 from .curvature import cli_choices, normalize_operator
+from .errors import UsageError
 from .segment import AUTO_REGION_RANGE, DEFAULT_REGIONS
-
-
-class UsageError(ValueError):
-    """Bad input or usage: exit code 2."""
 
 
 def _get_parser() -> argparse.ArgumentParser:
@@ -34,7 +30,13 @@ def _get_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"volseg {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
+    _add_segment(sub)
+    _add_isosurface(sub)
+    _add_others(sub)
+    return parser
 
+
+def _add_segment(sub):
     seg = sub.add_parser("segment", help="segment volume files or named datasets")
     seg.add_argument("inputs", nargs="+", metavar="INPUT",
                      help="a volume file (.raw, .dat, .nrrd, .nii, .npy) or a dataset name")
@@ -54,7 +56,8 @@ def _get_parser() -> argparse.ArgumentParser:
                          "nonzero, otsu, or 'value>T' (also >=, <, <=)")
     masking.add_argument("--mask-threshold", type=float, metavar="T",
                          help="segment the voxels with value > T (same as --mask 'value>T')")
-    seg.add_argument("--smooth", type=float, default=0.0, metavar="SIGMA",
+    seg.add_argument("--smooth", "--smooth-sigma", dest="smooth_sigma", type=float, default=0.0,
+                     metavar="SIGMA",
                      help="Gaussian pre-smoothing of the values, sigma in voxels (default 0: "
                      "none); 1 tames the checkerboard of 8-bit data")
     seg.add_argument("--plot-persistence", action="store_true",
@@ -62,6 +65,11 @@ def _get_parser() -> argparse.ArgumentParser:
     seg.add_argument("--chunks", type=int, metavar="N",
                      help="segment block by block in chunks of N^3 voxels (the blockwise path, "
                      "always taken for Zarr input): labels and curvature are written as .zarr")
+    _add_blockwise_options(seg)
+    _add_segment_io(seg)
+
+
+def _add_blockwise_options(seg):
     engine = seg.add_argument_group(
         "blockwise engine", "where the blockwise path (Zarr input, --chunks) runs its blocks")
     engine.add_argument("--scheduler", metavar="ADDRESS",
@@ -76,6 +84,9 @@ def _get_parser() -> argparse.ArgumentParser:
                         f"{MEMORY_SHARE:g} of this machine's RAM): an input whose in-memory run "
                         "would need more (about 40 bytes per voxel) is segmented block by block; "
                         "also the local cluster's worker limits together")
+
+
+def _add_segment_io(seg):
     seg.add_argument("--shape", type=int, nargs=3, metavar=("X", "Y", "Z"))
     seg.add_argument("--dtype", help="voxel type of raw input (uint8, uint16, float32, ...)")
     seg.add_argument("--value-scale", type=float, metavar="S",
@@ -91,6 +102,9 @@ def _get_parser() -> argparse.ArgumentParser:
     seg.add_argument("--json", action="store_true", help="print the summaries as JSON on stdout")
     seg.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
 
+
+def _add_isosurface(sub):
+    operators, shown = cli_choices()
     iso = sub.add_parser(
         "isosurface", help="segment the space-time isosurface of a time-varying volume",
         description="Extract the isosurface {F = LEVEL} of a time series F(x, y, z, t) as a "
@@ -113,8 +127,8 @@ def _get_parser() -> argparse.ArgumentParser:
     iso.add_argument("--relax", type=int, default=10, metavar="N",
                      help="mesh-quality rounds (tangential relaxation + projection onto the "
                      "level set; 0: the raw marching mesh; default 10)")
-    iso.add_argument("--smooth", type=int, default=10, metavar="N",
-                     help="rounds of 1-ring averaging of the curvature before the Morse "
+    iso.add_argument("--smooth-rounds", "--smooth", dest="smooth_rounds", type=int, default=10,
+                     metavar="N", help="rounds of 1-ring averaging of the curvature before the Morse "
                      "stage (the paper smooths estimates on irregular meshes; default 10, "
                      "0: none)")
     iso.add_argument("--boundary", choices=("partial", "nan"), default="partial",
@@ -127,6 +141,8 @@ def _get_parser() -> argparse.ArgumentParser:
     iso.add_argument("--json", action="store_true", help="print the summary as JSON on stdout")
     iso.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
 
+
+def _add_others(sub):
     fetch = sub.add_parser("fetch", help="download and verify named datasets")
     fetch.add_argument("names", nargs="+", metavar="NAME")
 
@@ -152,7 +168,6 @@ def _get_parser() -> argparse.ArgumentParser:
                          "a label volume whose 0 is background); 'a' or 'b': the foreground "
                          "(labels > 0) of that input")
     compare.add_argument("--json", action="store_true")
-    return parser
 
 
 def _regions(text):
@@ -171,45 +186,6 @@ def _progress(quiet):
     return say
 
 
-def _load(input_name, shape=None, dtype=None, allow_external_data=False, chunks=None):
-    """The Volume of a volume file or a named dataset (`volseg.datasets.resolve`); lazy
-    (a Dask array of `chunks`) when `chunks` is given."""
-    from .datasets import resolve
-    from .io import read_volume
-
-    path = resolve(input_name)
-    return read_volume(path, shape=shape, dtype=dtype, allow_external_data=allow_external_data,
-                       chunks=chunks)
-
-
-def _load_for_budget(input_name, args, budget, say):
-    """`_load`, lazily (the blockwise path, `DEFAULT_CHUNKS`) when --chunks is not given
-    but the in-memory path would need more than `budget` bytes (`IN_MEMORY_BYTES_PER_VOXEL`
-    per voxel). The file size bounds the voxel count from above, so small files are
-    read as before; compressed files are not estimated (their size says too little)."""
-    from .blockwise import DEFAULT_CHUNKS, IN_MEMORY_BYTES_PER_VOXEL
-    from .datasets import resolve
-
-    options = (args.shape, args.dtype, args.allow_external_data)
-    if args.chunks is not None:
-        return _load(input_name, *options, chunks=args.chunks)
-    path = resolve(input_name)       # a dataset name is verified once, here
-    input_name = str(path)
-    try:
-        size = path.stat().st_size if path.is_file() else 0
-    except OSError:
-        size = 0      # read_volume names the problem
-    if size * IN_MEMORY_BYTES_PER_VOXEL > budget and not path.name.lower().endswith(".gz"):
-        volume = _load(input_name, *options, chunks=DEFAULT_CHUNKS)
-        need = int(np.prod(volume.shape)) * IN_MEMORY_BYTES_PER_VOXEL
-        if need > budget:
-            say(f"{volume.name}: about {need / 2**30:.3g} GiB in memory exceeds the memory limit "
-                f"of {budget / 2**30:.3g} GiB: segmenting block by block in {DEFAULT_CHUNKS}^3 "
-                "chunks (--chunks N to choose, --memory-limit to change the limit)")
-            return volume
-    return _load(input_name, *options)
-
-
 def _check_out_dir(out_dir: Path):
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
@@ -217,107 +193,6 @@ def _check_out_dir(out_dir: Path):
         raise UsageError(f"{out_dir}: cannot create the output folder ({err.strerror})") from None
     if not os.access(out_dir, os.W_OK):
         raise UsageError(f"{out_dir}: the output folder is not writable")
-
-
-def _output_sets(volumes, out_dir, *, force, wait, persistence_plot=False):
-    """One locked, checked `OutputSet` per volume; two inputs with one stem are refused
-    before anything is computed."""
-    from .io import OutputSet
-    from .outputs import output_names
-
-    seen = {}
-    for volume in volumes:
-        if volume.name in seen:
-            raise UsageError(
-                f"{seen[volume.name]} and {volume.path or volume.name} would both write "
-                f"{out_dir / volume.name}_*; segment them into different folders")
-        seen[volume.name] = volume.path or volume.name
-    return [OutputSet(out_dir, v.name, output_names(v.name, persistence_plot, _is_lazy(v),
-                                                    int(np.prod(v.shape))),
-                      force=force, wait=wait) for v in volumes]
-
-
-def _is_lazy(volume) -> bool:
-    from ._validate import is_lazy
-
-    return is_lazy(volume.data)
-
-
-def segment_to_files(volume, outputs, *, operator="weighted", n_regions=None,
-                     min_persistence=None, value_scale=None, noise=None, seed=0, mask=None,
-                     smooth=0.0, engine=None, say=lambda message: None) -> dict:
-    """Segment `volume` and write its output set (an entered `OutputSet`); returns the summary."""
-    from .noise import add_value_noise
-    from .outputs import files_sha256, summary, write_segmentation
-    from .segment import segment_volume
-
-    started = time.perf_counter()
-    name = volume.name
-    if _is_lazy(volume):
-        from .blockwise import segment_to_zarr
-
-        return segment_to_zarr(volume, outputs, operator=operator, n_regions=n_regions,
-                               min_persistence=min_persistence, value_scale=value_scale,
-                               mask=mask, smooth=smooth, engine=engine, say=say)
-    data = np.asarray(volume)
-    if noise:
-        data = add_value_noise(data, noise, seed=seed)
-    say(f"{name}: curvature ({operator}) and Morse complex of a {'x'.join(map(str, data.shape))} volume")
-    result = segment_volume(data, operator=operator, n_regions=n_regions,
-                            min_persistence=min_persistence, value_scale=value_scale,
-                            spacing=volume.spacing, mask=mask, smooth=smooth)
-    info = summary(result, name=name, source=volume.path, checksum=files_sha256(volume.files),
-                   files=volume.files, frame=volume.frame, noise=noise, seed=seed,
-                   requested_regions=n_regions)
-    say(f"{name}: {result.n_regions} regions{result.mask.phrase()} from "
-        f"{len(result.hierarchy.maxima)} maxima; writing")
-    info["timings_s"]["total"] = round(time.perf_counter() - started, 4)
-    title = f"{name}: {result.n_regions} regions, {result.operator.replace('_', '-')} curvature"
-    if result.smooth:
-        title += f", smoothed sigma {result.smooth:g}"
-    if result.mask.mask is not None:
-        title += f", mask {result.mask.used}"
-    return write_segmentation(outputs, result, data, info, frame=volume.frame, title=title)
-
-
-def _chunked(volume, size):
-    """A lazily read `volume` with its data in `size`^3 chunks (clipped to the shape:
-    a Zarr store's own chunks are rechunked)."""
-    from .io import Volume
-
-    if any(size > n for n in volume.shape):
-        raise UsageError(f"--chunks {size} is larger than the volume {volume.path or volume.name} "
-                         f"along an axis (shape {volume.shape}); use at most {min(volume.shape)}")
-    return Volume(volume.data.rechunk(size), frame=volume.frame, name=volume.name,
-                  source=volume.source, path=volume.path, files=volume.files)
-
-
-def _tagged(say, tag):
-    return lambda message: say(tag + message)
-
-
-def _segment_all(volumes, out_dir, args, say, **options):
-    """Lock and check every output set, then segment and write each volume."""
-    sets = _output_sets(volumes, out_dir, force=args.force, wait=getattr(args, "wait", False),
-                        persistence_plot=getattr(args, "plot_persistence", False))
-    summaries = []
-    with ExitStack() as stack:
-        for outputs in sets:
-            stack.enter_context(outputs)
-            for line in outputs.recovered:
-                say(f"{outputs.folder}: {line}")
-        engine = options.get("engine")
-        if engine is not None and any(_is_lazy(v) for v in volumes):
-            # Started (or reached) after the outputs are locked and checked, before
-            # anything is computed: an unreachable scheduler writes nothing.
-            stack.enter_context(engine)
-            say(f"blockwise engine: {engine.describe()}")
-        for number, (volume, outputs) in enumerate(zip(volumes, sets, strict=True), 1):
-            step = say if len(volumes) == 1 else _tagged(say, f"[{number}/{len(volumes)}] ")
-            summary = segment_to_files(volume, outputs, say=step, **options)
-            summaries.append(summary)
-            step(f"{volume.name}: wrote {', '.join(Path(p).name for p in summary['outputs'].values())}")
-    return summaries
 
 
 def _check_mask_rule(rule):
@@ -337,7 +212,8 @@ def _check_cut_options(args):
 
 
 def _cmd_segment(args):
-    from .engine import Engine
+    from .blockwise.engine import Engine
+    from .files import chunked, load_for_budget, segment_files
 
     say = _progress(args.quiet)
     out_dir = Path(args.out_dir)
@@ -347,73 +223,32 @@ def _cmd_segment(args):
     # Read and check every input before writing or computing anything.
     if args.chunks is not None and args.chunks < 2:
         raise UsageError(f"--chunks must be at least 2 voxels, got {args.chunks}")
-    if not (np.isfinite(args.smooth) and args.smooth >= 0):
-        raise UsageError(f"--smooth must be a non-negative number of voxels, got {args.smooth}")
+    if not (np.isfinite(args.smooth_sigma) and args.smooth_sigma >= 0):
+        raise UsageError(f"--smooth must be a non-negative number of voxels, got "
+                         f"{args.smooth_sigma}")
     mask = args.mask if args.mask_threshold is None else f"value>{args.mask_threshold!r}"
     _check_mask_rule(mask)
-    volumes = [_load_for_budget(name, args, engine.memory_limit, say) for name in args.inputs]
+    volumes = [load_for_budget(name, engine.memory_limit, shape=args.shape, dtype=args.dtype,
+                               allow_external_data=args.allow_external_data,
+                               chunks=args.chunks, say=say) for name in args.inputs]
     if args.chunks is not None:
-        volumes = [_chunked(v, args.chunks) for v in volumes]
-    for volume in volumes:
-        if _is_lazy(volume):   # what the blockwise path cannot do, refused before it starts
-            if args.noise:
-                raise UsageError("--noise needs the volume in memory; drop --chunks")
+        volumes = [chunked(v, args.chunks) for v in volumes]
+    if args.noise and any(is_lazy(v.data) for v in volumes):
+        raise UsageError("--noise needs the volume in memory; drop --chunks")
     _check_out_dir(out_dir)
-    summaries = _segment_all(
-        volumes, out_dir, args, say, operator=normalize_operator(args.operator),
-        n_regions=args.regions, min_persistence=args.min_persistence,
-        value_scale=args.value_scale, noise=args.noise, seed=args.seed, mask=mask,
-        smooth=args.smooth, engine=engine)
+    summaries = segment_files(
+        volumes, out_dir, force=args.force, wait=args.wait,
+        persistence_plot=args.plot_persistence, engine=engine, say=say,
+        operator=normalize_operator(args.operator), n_regions=args.regions,
+        min_persistence=args.min_persistence, value_scale=args.value_scale, noise=args.noise,
+        seed=args.seed, mask=mask, smooth_sigma=args.smooth_sigma)
     if args.json:
         print(_json.dumps(summaries if len(summaries) > 1 else summaries[0], indent=2))
     return 0
 
 
-def series_to_files(series, level, outputs, *, time_scale=1.0, relax=10, operator="weighted",
-                    n_regions=None, min_persistence=None, boundary="partial", smooth=10,
-                    say=lambda message: None) -> dict:
-    """Segment the space-time isosurface of `series` and write its output set (an
-    entered `OutputSet` named by `series_output_names`); returns the summary."""
-    from .outputs import files_sha256
-    from .spacetime import segment_series
-    from .spacetime_outputs import series_summary, write_series_segmentation
-
-    started = time.perf_counter()
-    say(f"{series.name}: isosurface at {level:g} of a {'x'.join(map(str, series.shape))} "
-        f"series, {relax} relaxation rounds, {operator} curvature, Morse complex")
-    result = segment_series(series.data, level, spacing=series.spacing, time_scale=time_scale,
-                            relax=relax, operator=operator, n_regions=n_regions,
-                            min_persistence=min_persistence, boundary=boundary, smooth=smooth)
-    slices = result.slices()
-    seg = result.segmentation
-    say(f"{series.name}: {len(result.surface.vertices)} vertices, "
-        f"{len(result.surface.simplices)} tetrahedra; {seg.n_regions} regions from "
-        f"{len(seg.hierarchy.maxima)} maxima; writing")
-    info = series_summary(result, slices, name=series.name, source=series.files[0] if series.files else None,
-                          checksum=files_sha256(series.files), files=series.files)
-    info["timings_s"]["total"] = round(time.perf_counter() - started, 4)
-    title = (f"{series.name}: isosurface {level:g} in space-time, {seg.n_regions} regions "
-             f"({seg.operator.replace('_', '-')} curvature)")
-    return write_series_segmentation(outputs, result, slices, info, title=title)
-
-
-def _series_run(series, level, out_dir, args, say, **options):
-    from .io import OutputSet
-    from .spacetime_outputs import series_output_names
-
-    names = series_output_names(series.name, series.shape[-1])
-    with OutputSet(out_dir, f"{series.name}_iso", names, force=args.force,
-                   wait=getattr(args, "wait", False)) as outputs:
-        for line in outputs.recovered:
-            say(f"{outputs.folder}: {line}")
-        summary = series_to_files(series, level, outputs, say=say, **options)
-    say(f"{series.name}: wrote {Path(summary['outputs']['mesh']).name}, "
-        f"{Path(summary['outputs']['pvd']).name} (+{series.shape[-1]} .vtu), "
-        f"{Path(summary['outputs']['summary']).name}, {Path(summary['outputs']['preview']).name}")
-    return summary
-
-
 def _cmd_isosurface(args):
+    from .files import segment_series_files
     from .io.series import read_series
 
     say = _progress(args.quiet)
@@ -423,9 +258,9 @@ def _cmd_isosurface(args):
         raise UsageError(f"--level must be a finite number, got {args.level}")
     if not (np.isfinite(args.time_scale) and args.time_scale > 0):
         raise UsageError(f"--time-scale must be a positive number, got {args.time_scale}")
-    if args.relax < 0 or args.smooth < 0:
+    if args.relax < 0 or args.smooth_rounds < 0:
         raise UsageError(f"--relax and --smooth must be numbers of rounds >= 0, got "
-                         f"{args.relax} and {args.smooth}")
+                         f"{args.relax} and {args.smooth_rounds}")
     series = read_series(args.inputs, allow_external_data=args.allow_external_data)
     if args.name:
         if not args.name.strip() or "/" in args.name or args.name.startswith("."):
@@ -436,10 +271,11 @@ def _cmd_isosurface(args):
         raise UsageError(f"--level {args.level:g} is not crossed: the series ranges over "
                          f"[{lo:g}, {hi:g}]")
     _check_out_dir(out_dir)
-    summary = _series_run(series, args.level, out_dir, args, say, time_scale=args.time_scale,
-                          relax=args.relax, operator=normalize_operator(args.operator),
-                          n_regions=args.regions, min_persistence=args.min_persistence,
-                          boundary=args.boundary, smooth=args.smooth)
+    summary = segment_series_files(
+        series, args.level, out_dir, force=args.force, wait=args.wait, say=say,
+        time_scale=args.time_scale, relax=args.relax, operator=normalize_operator(args.operator),
+        n_regions=args.regions, min_persistence=args.min_persistence, boundary=args.boundary,
+        smooth_rounds=args.smooth_rounds)
     if args.json:
         print(_json.dumps(summary, indent=2))
     return 0
@@ -455,6 +291,7 @@ def _cmd_fetch(args):
 
 def _cmd_demo(args):
     from .datasets import demo_volume
+    from .files import segment_files
     from .io import Volume
 
     out_dir = Path(args.out_dir)
@@ -462,7 +299,8 @@ def _cmd_demo(args):
     if args.time:
         return _demo_time(args, out_dir)
     volume = Volume(demo_volume(), name="demo", source="built-in synthetic")
-    summary, = _segment_all([volume], out_dir, args, _progress(args.quiet), mask="auto")
+    summary, = segment_files([volume], out_dir, force=args.force, say=_progress(args.quiet),
+                             mask="auto")
     print(f"segmented a built-in {'x'.join(map(str, volume.shape))} volume into "
           f"{summary['n_regions']} regions; wrote:")
     for path in summary["outputs"].values():
@@ -476,13 +314,15 @@ DEMO_TIME_REGIONS = 6
 
 def _demo_time(args, out_dir):
     from .datasets import demo_series
+    from .files import segment_series_files
     from .io.series import Series
 
     data = demo_series()
     step = 2.0 / (data.shape[0] - 1)
     series = Series(data, (step, step, step), "demo_time", (), None)
-    summary = _series_run(series, 0.5, out_dir, args, _progress(args.quiet), time_scale=step,
-                          n_regions=DEMO_TIME_REGIONS)
+    summary = segment_series_files(series, 0.5, out_dir, force=args.force,
+                                   say=_progress(args.quiet), time_scale=step,
+                                   n_regions=DEMO_TIME_REGIONS)
     print(f"segmented the space-time isosurface of a built-in "
           f"{'x'.join(map(str, data.shape))} series (two blobs merging) into "
           f"{summary['n_regions']} regions; wrote:")
@@ -493,7 +333,9 @@ def _demo_time(args, out_dir):
 
 
 def _cmd_info(args):
-    volume = _load(args.input, args.shape, args.dtype, args.allow_external_data)
+    from .files import load_volume
+
+    volume = load_volume(args.input, args.shape, args.dtype, args.allow_external_data)
     data = volume.data
     frame = volume.frame
     affine = "\n".join("    " + " ".join(f"{v:10.4g}" for v in row) for row in frame.affine)
@@ -507,9 +349,10 @@ def _cmd_info(args):
 
 def _cmd_compare(args):
     from . import metrics
+    from .files import load_volume
 
-    a = _load(args.labels_a).data
-    b = _load(args.labels_b).data
+    a = load_volume(args.labels_a).data
+    b = load_volume(args.labels_b).data
     if a.dtype.kind == "f" or b.dtype.kind == "f":
         raise UsageError("label volumes must hold integer labels")
     if a.shape != b.shape:
@@ -517,7 +360,7 @@ def _cmd_compare(args):
     mask = None
     if args.mask:
         mask = {"a": a, "b": b}.get(args.mask)
-        mask = (_load(args.mask).data if mask is None else mask) != 0
+        mask = (load_volume(args.mask).data if mask is None else mask) != 0
         if mask.shape != a.shape:
             raise UsageError(f"--mask {args.mask} is {mask.shape}, the labels are {a.shape}")
     result = metrics.compare(a, b, mask=mask)

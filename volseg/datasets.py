@@ -19,14 +19,12 @@ from pathlib import Path
 
 import numpy as np
 
+from .errors import DatasetError  # noqa: F401 (re-exported)
+
 __all__ = ["Dataset", "REGISTRY", "DatasetError", "fetch", "resolve", "cache_dir", "sha256",
            "available_locally", "demo_volume"]
 
 BASE_URL = "https://klacansky.com/open-scivis-datasets"
-
-
-class DatasetError(ValueError):
-    """A dataset cannot be had: unknown name, offline, or a checksum mismatch."""
 
 
 @dataclass(frozen=True)

@@ -126,7 +126,8 @@ def segment_series(
     n_regions: int | str | None = None,
     min_persistence: float | None = None,
     boundary: str = "partial",
-    smooth: int = 0,
+    smooth_rounds: int = 0,
+    smooth: int | None = None,
 ) -> SpaceTimeSegmentation:
     """Segment the space-time isosurface of a time-varying volume.
 
@@ -147,8 +148,10 @@ def segment_series(
         Rounds of `relax_isosurface` (0: the raw marching mesh).
     snap : float
         Passed to `isosurface`.
-    operator, n_regions, min_persistence, boundary, smooth
+    operator, n_regions, min_persistence, boundary, smooth_rounds
         Passed to `segment_mesh`.
+    smooth
+        Deprecated name of `smooth_rounds`.
 
     Returns
     -------
@@ -161,13 +164,13 @@ def segment_series(
         does not cross, bad spacing or time scale, and what `segment_mesh` refuses.
     """
     from . import _validate
+    from .segment import _renamed
 
+    smooth_rounds = _renamed(smooth_rounds, smooth, "smooth_rounds", "smooth", 0)
     data = _validate.volume_array(field, "field", ndim=4)
     spacing = _validate.spacing(spacing)
     time_scale = _validate.number(time_scale, "time_scale", positive=True)
-    relax = int(relax)
-    if relax < 0:
-        raise ValueError(f"`relax` must be a number of rounds >= 0, got {relax}")
+    relax = _validate.rounds(relax, "relax")
     steps = (*spacing, time_scale)
     timings = {}
     start = time.perf_counter()
@@ -186,7 +189,7 @@ def segment_series(
         grades["relaxed"] = quality(surface.vertices, surface.simplices)
     result = segment_mesh(surface.vertices, surface.simplices, operator=operator,
                           n_regions=n_regions, min_persistence=min_persistence,
-                          boundary=boundary, smooth=smooth)
+                          boundary=boundary, smooth_rounds=smooth_rounds)
     timings.update(result.timings)
     return SpaceTimeSegmentation(surface, result, float(level), steps, data.shape, relax,
                                  grades, timings)

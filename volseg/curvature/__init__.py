@@ -31,13 +31,16 @@ __all__ = [
     "vertex_curvature",
     "grid_curvature",
     "default_value_scale",
+    "checked_grid_curvature",
+    "check_padding",
     "bending_angles",
     "cotangent_weights",
 ]
 
 
 def __getattr__(name):  # the grid path pulls in numba: load it on first use
-    if name in ("grid_curvature", "default_value_scale"):
+    if name in ("grid_curvature", "default_value_scale", "checked_grid_curvature",
+                "check_padding"):
         from . import _grid
 
         return getattr(_grid, name)

@@ -5,61 +5,13 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .. import _kuhn, _validate
+from .. import _validate
+from ._grid_tables import _kernel_tables
 from ._registry import get_operator
 
-__all__ = ["grid_curvature", "default_value_scale"]
+__all__ = ["grid_curvature", "default_value_scale", "checked_grid_curvature", "check_padding"]
 
 _PADDING = {"linear": {"mode": "reflect", "reflect_type": "odd"}, "mirror": {"mode": "reflect"}}
-
-
-def _tables():
-    """Offsets of one cube's 6 tetrahedra, the 6 neighbours across its low sides, its 12 faces.
-
-    Points are numbered 0..10: the cube corners (4 dx + 2 dy + dz) and then the
-    three points one step below the cube's lowest corner along x, y, z.
-    """
-    unit = np.eye(3, dtype=np.int64)
-    offsets = np.array([[a, b, c] for a in (0, 1) for b in (0, 1) for c in (0, 1)]
-                       + [-unit[0], -unit[1], -unit[2]], dtype=np.int64)
-    index = {tuple(o): n for n, o in enumerate(offsets)}
-    paths = [list(map(tuple, path)) for path in _kuhn.cube_paths(3)]
-    axes = [list(order) for order in _kuhn.axis_orders(3)]
-    for path, (a, b, c) in zip(_kuhn.cube_paths(3), _kuhn.axis_orders(3)):
-        # The tetrahedron (c, a, b) of the cube below along c shares the face
-        # {0, e_a, e_a + e_b} with this cube's tetrahedron (a, b, c).
-        paths.append([tuple(-unit[c]), *map(tuple, path[:3])])
-        axes.append([c, a, b])
-    path_idx = np.array([[index[tuple(p)] for p in path] for path in paths], dtype=np.int64)
-    faces, far, tets = [], [], []
-    as_set = [set(row) for row in path_idx.tolist()]
-    for ta in range(6):
-        for tb in range(ta + 1, 12):
-            if tb >= 6 and tb != ta + 6:
-                continue
-            shared = as_set[ta] & as_set[tb]
-            if len(shared) == 3:
-                faces.append(sorted(shared))
-                far.append(next(iter(as_set[tb] - shared)))
-                tets.append([ta, tb])
-    assert len(faces) == 12
-    return (offsets, path_idx, np.array(axes, dtype=np.int64), np.array(faces, dtype=np.int64),
-            np.array(far, dtype=np.int64), np.array(tets, dtype=np.int64))
-
-
-_OFFSETS, _PATH_IDX, _AXES, _FACE_IDX, _FACE_FAR, _FACE_TETS = _tables()
-
-
-def _kernel_tables(h):
-    """What the kernels read at run time: the point offsets, tetrahedron paths and axes
-    (intrinsic operator) and each face's |u_b x v_b|^2, the squared doubled area of its
-    base triangle with the spacing folded in (weighted operator). The rest of the face
-    geometry is written into the generated stencil."""
-    base = _OFFSETS * h
-    p0 = base[_FACE_IDX[:, 0]]
-    ub, vb = base[_FACE_IDX[:, 1]] - p0, base[_FACE_IDX[:, 2]] - p0
-    cross2 = (np.cross(ub, vb) ** 2).sum(axis=1)
-    return (_OFFSETS, _PATH_IDX, _AXES, cross2)
 
 
 def default_value_scale(volume: ArrayLike, spacing=(1.0, 1.0, 1.0), *,
@@ -98,7 +50,8 @@ def grid_curvature(
     *,
     spacing=None,
     value_scale: float | None = None,
-    boundary: str = "linear",
+    padding: str = "linear",
+    boundary: str | None = None,
 ) -> NDArray[np.float64]:
     """Curvature of a volume's graph in R^4, on the implicit Kuhn tessellation.
 
@@ -117,11 +70,13 @@ def grid_curvature(
         Grid spacing (dx, dy, dz); default the Volume's spacing, or 1.
     value_scale : float, optional
         s; default `default_value_scale` (the graph as tall as it is wide).
-    boundary : {'linear', 'mirror'}
+    padding : {'linear', 'mirror'}
         How boundary voxels get a complete star: the volume is padded by one voxel,
         continued linearly (``f[-1] = 2 f[0] - f[1]``: a plane stays flat up to the
         boundary, and the boundary adds no curvature across itself) or mirrored
         (``f[-1] = f[1]``: zero normal derivative, as for a symmetric field).
+    boundary
+        Deprecated name of `padding`.
 
     Returns
     -------
@@ -138,8 +93,13 @@ def grid_curvature(
     >>> round(float(h[16, 16, 16]), 2)  # the peak of -0.4|x|^2: H = +0.8
     0.8
     """
+    if boundary is not None:
+        import warnings
+
+        warnings.warn("`boundary` is deprecated: use `padding`", DeprecationWarning, stacklevel=2)
+        padding = boundary
     entry = get_operator(operator)
-    check_boundary(boundary)
+    check_padding(padding)
     h = _validate.spacing(spacing, getattr(volume, "spacing", (1.0, 1.0, 1.0)))
     lazy = _validate.is_lazy(getattr(volume, "data", volume))
     data = (_validate.lazy_volume_array(getattr(volume, "data", volume)) if lazy
@@ -147,28 +107,32 @@ def grid_curvature(
     if value_scale is None:
         value_scale = default_value_scale(data, h)
     scale = _validate.value_scale(value_scale)
-    if lazy:
+    return checked_grid_curvature(data, entry, h, scale, padding)
+
+
+def check_padding(padding: str) -> str:
+    """`padding` if it is a padding rule of `grid_curvature`, else a ValueError."""
+    if padding not in _PADDING:
+        raise ValueError(f"unknown `padding` {padding!r}; choose one of {', '.join(_PADDING)}")
+    return padding
+
+
+def checked_grid_curvature(data, entry, spacing, value_scale, padding, *,
+                           block_hooks=None) -> NDArray[np.float64]:
+    """`grid_curvature` of arguments already checked by `volseg._validate` (a 3-D real
+    array, finite unless lazy, an `Operator` entry, three positive spacings, a positive
+    scale, a padding rule). A Dask array goes block by block (`_grid_blocks`), with
+    the blockwise path's `block_hooks` (`volseg._block_hooks.BlockHooks`) if given."""
+    if _validate.is_lazy(data):
         from ._grid_blocks import dask_grid_curvature
 
-        return dask_grid_curvature(data, entry, h, scale, boundary)
-    return checked_grid_curvature(data, entry, h, scale, boundary)
-
-
-def check_boundary(boundary: str) -> str:
-    if boundary not in _PADDING:
-        raise ValueError(f"unknown `boundary` {boundary!r}; choose one of {', '.join(_PADDING)}")
-    return boundary
-
-
-def checked_grid_curvature(data, entry, spacing, value_scale, boundary) -> NDArray[np.float64]:
-    """`grid_curvature` of arguments already checked by `volseg._validate` (a 3-D real
-    finite array, an `Operator` entry, three positive spacings, a positive scale)."""
+        return dask_grid_curvature(data, entry, spacing, value_scale, padding, block_hooks)
     from ._grid_kernels import grid_kernel
 
     h = np.array(spacing, dtype=np.float64)
     scaled = data.astype(np.float64, order="C")  # a copy in C order, whatever the input's
     scaled *= value_scale
-    fp = np.pad(scaled, 1, **_PADDING[boundary])  # C order in, C order out
+    fp = np.pad(scaled, 1, **_PADDING[padding])  # C order in, C order out
     del scaled
     acc = np.zeros((entry.grid_channels,) + fp.shape)
     grid_kernel(fp, h, entry.grid_code, _kernel_tables(h), acc)

@@ -6,7 +6,7 @@ gets a 1-voxel halo of its neighbours' raw values (`volseg._halo`: their shells,
 no block stays in memory for its neighbours' sake, and in the input's own type: 1
 byte per voxel for uint8), and then, inside its task: scaled, padded where it meets
 the volume's boundary exactly as the in-memory path pads the whole volume (axis by
-axis, by the `boundary` rule, the same arithmetic), and run through the in-memory
+axis, by the `padding` rule, the same arithmetic), and run through the in-memory
 kernel, keeping its interior. The value scale, a global statistic, is computed first
 (one pass for min and max). Each block runs its slabs in the parity order they have
 in the whole volume, so every voxel's sums are added in the in-memory order and the
@@ -18,8 +18,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._grid import _kernel_tables
+from .._halo import block_starts, with_halo
 from ._grid_kernels import grid_kernel
+from ._grid_tables import _kernel_tables
 
 __all__ = ["dask_grid_curvature"]
 
@@ -30,9 +31,9 @@ class _Block:
     module's own (a closure carries the numba dispatcher by value, and each task then
     rebuilt it and reloaded its cache: 0.8 s per block)."""
 
-    def __init__(self, entry, h, value_scale, boundary, starts, shape):
+    def __init__(self, entry, h, value_scale, padding, starts, shape):
         self.entry, self.h = entry, np.asarray(h, dtype=np.float64)
-        self.value_scale, self.boundary = value_scale, boundary
+        self.value_scale, self.padding = value_scale, padding
         self.starts, self.shape = starts, shape
 
     def __call__(self, block, block_id=None):
@@ -43,9 +44,9 @@ class _Block:
             start = self.starts[axis][block_id[axis]]
             stop = start + block.shape[axis] - 2
             if start == 0:
-                _pad(fp, axis, 0, self.boundary)
+                _pad(fp, axis, 0, self.padding)
             if stop == self.shape[axis]:
-                _pad(fp, axis, -1, self.boundary)
+                _pad(fp, axis, -1, self.padding)
         if not np.isfinite(fp).all():
             raise ValueError("the volume holds NaN or infinite values; replace them (e.g. "
                              "numpy.nan_to_num) first")
@@ -58,7 +59,7 @@ class _Block:
         return entry.grid_finish(acc, (slice(1, -1),) * 3, h)
 
 
-def _pad(fp, axis: int, end: int, boundary: str):
+def _pad(fp, axis: int, end: int, padding: str):
     """Set the halo layer at `end` (0 or -1) of `axis` from the two layers inside it:
     linear f[-1] = 2 f[0] - f[1] (np.pad reflect, odd), else mirrored f[-1] = f[1]."""
     def layer(i):
@@ -66,24 +67,23 @@ def _pad(fp, axis: int, end: int, boundary: str):
         index[axis] = i
         return tuple(index)
     inner, next_ = (1, 2) if end == 0 else (-2, -3)
-    if boundary == "linear":
+    if padding == "linear":
         fp[layer(end)] = 2 * fp[layer(inner)] - fp[layer(next_)]
     else:
         fp[layer(end)] = fp[layer(next_)]
 
 
-def dask_grid_curvature(array, entry, spacing, value_scale, boundary, wrap=None, reread=False):
+def dask_grid_curvature(array, entry, spacing, value_scale, padding, hooks=None):
     """`checked_grid_curvature` for a 3-D Dask array (checked: real, 3-D, >= 2 per
     axis; finiteness is checked per block). Returns a lazy float64 Dask array with the
-    input's chunks. `wrap(stage, function)`, if given, wraps the per-block function
-    (`volseg._resume.WorkFolder.wrap`: finished blocks kept on disk). `reread`: the
-    input's blocks are cheap to make again (read from a file): each is made again for
-    its own halo (`volseg._halo`, fresh) instead of waiting in memory for it."""
-    from .._halo import block_starts, with_halo
-
+    input's chunks. `hooks` (`volseg._block_hooks.BlockHooks`): its ``wrap`` wraps the
+    per-block function (finished blocks kept on disk); with ``reread``, the input's
+    blocks are cheap to make again (read from a file), so each is made again for its
+    own halo (`volseg._halo`, fresh) instead of waiting in memory for it."""
     starts = [s.tolist() for s in block_starts(array.chunks)]
-    kernel = _Block(entry, spacing, value_scale, boundary, starts, array.shape)
-    if wrap is not None:
-        kernel = wrap("curvature", kernel)
+    kernel = _Block(entry, spacing, value_scale, padding, starts, array.shape)
+    reread = False
+    if hooks is not None:
+        kernel, reread = hooks.wrap("curvature", kernel), hooks.reread
     return with_halo(array, 0, fresh=reread).map_blocks(
         kernel, dtype=np.float64, chunks=array.chunks, meta=np.zeros((0, 0, 0)))

@@ -8,7 +8,7 @@ those indices as constants, every gradient, angle and per-corner sum lives in
 registers and the compiler schedules the arithmetic freely; read from tables at run
 time, the same kernel spent more time on indexing and on small arrays in memory than
 on its 12 `atan2` (measured in issue 16's benchmark). The tables stay the one source
-(`_grid._tables`, from `volseg._kuhn`); `tests/test_grid_curvature.py` checks that the
+(`_grid_tables._tables`, from `volseg._kuhn`); `tests/test_grid_curvature.py` checks that the
 committed file is what this script writes.
 """
 
@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ._grid import _AXES, _FACE_FAR, _FACE_IDX, _FACE_TETS, _OFFSETS, _PATH_IDX
+from ._grid_tables import _AXES, _FACE_FAR, _FACE_IDX, _FACE_TETS, _OFFSETS, _PATH_IDX
 
 TARGET = Path(__file__).with_name("_grid_stencil.py")
 XYZ = "xyz"

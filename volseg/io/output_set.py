@@ -26,14 +26,12 @@ import stat
 import tempfile
 from pathlib import Path
 
+from ..errors import OutputError  # noqa: F401 (re-exported)
+
 __all__ = ["OutputSet", "OutputError", "FolderLock", "recover"]
 
 _STAGING = ".volseg-staging-"
 _JOURNAL = "COMMIT"
-
-
-class OutputError(ValueError):
-    """The outputs cannot be written as asked (exist, locked, not a file)."""
 
 
 class FolderLock:

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from .. import _validate
 from ._files import (
     MAX_HEADER_BYTES,
     confined,
@@ -23,7 +24,6 @@ from ._files import (
     read_head,
     regular_file_size,
 )
-from .. import _validate
 from .volume import Frame, Volume, VolumeFileError
 
 __all__ = ["read_volume", "DTYPES"]

@@ -9,17 +9,9 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from ..errors import VolumeFileError  # noqa: F401 (re-exported)
+
 __all__ = ["Volume", "Frame", "VolumeFileError"]
-
-
-class VolumeFileError(ValueError):
-    """A volume file that cannot be read as it is: it names the file and the field.
-
-    Raised by every reader for every malformed input (truncated data, a header field
-    that does not parse, a declared size the file cannot hold, a data file outside
-    the header's folder, a device or a pipe where a file should be). A subclass of
-    ValueError, so ``except ValueError`` keeps working.
-    """
 
 
 #: NIfTI xform codes: 0 unknown, 1 scanner, 2 aligned, 3 Talairach, 4 MNI, 5 template.

@@ -4,11 +4,11 @@ the input's voxel-to-world frame."""
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
+from .._atomic import temporary_beside
 from .readers import NRRD_TYPES
 from .volume import Frame
 
@@ -17,15 +17,8 @@ __all__ = ["write_volume", "atomic_path"]
 _NRRD_NAMES = {code: name for name, code in NRRD_TYPES.items() if "_" not in name and " " not in name}
 
 
-def atomic_path(path: Path) -> Path:
-    """A temporary file beside `path` (same folder, so renaming it is atomic)."""
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)
-    os.close(fd)
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; outputs should read like any file
-    return Path(tmp)
+#: A temporary file beside a path (kept under this name for callers of volseg.io).
+atomic_path = temporary_beside
 
 
 def _nifti(path: Path, data, frame: Frame, compressed: bool):

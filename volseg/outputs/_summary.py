@@ -1,26 +1,22 @@
-"""The files of one segmentation: their names, the summary, and writing them as one set.
+"""The names of a segmentation's files, its summary and its title.
 
 ``<stem>_labels.nii.gz`` and ``<stem>_curvature.nii.gz`` carry the input's
 voxel-to-world frame (affine and NIfTI codes); ``<stem>_summary.json`` is strict
 JSON (non-finite numbers are null); ``<stem>_preview.png`` shows mid slices.
-They are written through `volseg.io.OutputSet`: locked, checked up front, all or
-nothing.
 """
 
 from __future__ import annotations
 
 import hashlib
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
 
-from . import _json
-from ._version import __version__
-from .io import Frame, OutputSet, write_volume
+from .._version import __version__
+from ..io import Frame
 
-__all__ = ["OUTPUT_SUFFIXES", "BLOCKWISE_NIFTI_VOXELS", "output_names", "files_sha256", "summary", "result_summary",
-           "input_summary", "write_segmentation"]
+__all__ = ["OUTPUT_SUFFIXES", "BLOCKWISE_NIFTI_VOXELS", "output_names", "files_sha256", "summary",
+           "result_summary", "input_summary", "result_title"]
 
 OUTPUT_SUFFIXES = {"labels": "_labels.nii.gz", "curvature": "_curvature.nii.gz",
                    "summary": "_summary.json", "preview": "_preview.png"}
@@ -118,7 +114,8 @@ def summary(result, *, name, source=None, checksum=None, files=(), frame: Frame 
         "value_scale": result.value_scale,
         "noise_percent": noise or 0.0,
         "seed": seed if noise else None,
-        "smooth_sigma_voxels": result.smooth,
+        "smooth_sigma_voxels": result.smooth_sigma,
+        "padding": result.padding,
         "mask": result.mask.describe(),
         "labels": "0 outside the mask, regions 1..k",
         "n_regions": common.pop("n_regions"),
@@ -128,39 +125,12 @@ def summary(result, *, name, source=None, checksum=None, files=(), frame: Frame 
     return out
 
 
-def write_segmentation(outputs: OutputSet, result, values, info: dict, *, frame: Frame | None,
-                       title: str) -> dict:
-    """Write labels, curvature, summary and preview of `result` as one set.
-
-    `values` is the volume that was segmented (for the preview), `info` the summary
-    (its ``outputs`` entry is filled in here). Returns the summary.
-    """
-    from .preview import write_persistence_plot, write_preview
-
-    frame = frame or Frame.from_spacing(result.spacing)
-    info = {**info, "outputs": {kind: str(path) for kind, path in outputs.targets.items()}}
-    label_type = np.min_scalar_type(max(int(result.n_regions), 0))
-    hierarchy = result.hierarchy
-    curve = (hierarchy.event_persistence, hierarchy.n_components, result.min_persistence)
-
-    def write(paths):
-        # Labels in the smallest unsigned type that holds them (what label viewers
-        # expect); the three writers run at once (zlib releases the GIL).
-        with ThreadPoolExecutor(3) as pool:
-            jobs = [
-                pool.submit(write_volume, paths["labels"], result.labels.astype(label_type),
-                            frame=frame),
-                pool.submit(write_volume, paths["curvature"],
-                            result.curvature.astype(np.float32), frame=frame),
-                pool.submit(write_preview, paths["preview"], values, result.curvature,
-                            result.labels, title=title, persistence=curve),
-            ]
-            if "persistence" in paths:
-                jobs.append(pool.submit(write_persistence_plot, paths["persistence"], *curve,
-                                        result.n_regions))
-            for job in jobs:
-                job.result()
-        Path(paths["summary"]).write_text(_json.dumps(info, indent=2))
-
-    outputs.commit(write)
-    return info
+def result_title(name: str, result, *, blockwise: bool = False) -> str:
+    """The preview's title of a volume's `Segmentation`: regions, operator, smoothing,
+    mask, path."""
+    title = f"{name}: {result.n_regions} regions, {result.operator.replace('_', '-')} curvature"
+    if result.smooth_sigma:
+        title += f", smoothed sigma {result.smooth_sigma:g}"
+    if result.mask is not None and result.mask.mask is not None:
+        title += f", mask {result.mask.used}"
+    return title + (" (blockwise)" if blockwise else "")

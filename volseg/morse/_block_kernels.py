@@ -1,4 +1,4 @@
-"""Compiled passes of the blockwise Morse build (`volseg._morse_blocks`): one block of a
+"""Compiled passes of the blockwise Morse build (`volseg.morse._blocks`): one block of a
 3-D field at a time, with a 1-voxel halo; flat, checked arrays, no defaults.
 
 Voxels are named by their global flat index (C order) ``gid``; "higher" is the

@@ -3,7 +3,7 @@
 
 1. Per block, with a 1-voxel halo (-inf outside the volume; `volseg._halo`, which
    frees each block once its halo layers are copied): steepest ascent and path
-   compression inside the block (`_morse_block_kernels.ascend`). A path ends at a
+   compression inside the block (`_block_kernels.ascend`). A path ends at a
    maximum of the block or leaves it; a path that leaves lands on a neighbouring
    block's outer layer. Each block returns its maxima and the ends of its outer
    layer's paths, a few percent of its voxels.
@@ -11,7 +11,7 @@
    (the chains follow strictly rising values, so they end), and the maxima are
    numbered by decreasing (value, index), as in memory.
 3. Per block again: cells = maximum id of each voxel, from the path ends the ascent
-   kept on disk (`ends_folder`, the blockwise pipeline's work folder), or, without
+   kept on disk (the hooks' `scratch` folder: the blockwise work folder), or, without
    one, by climbing again (so no block-sized intermediate outlives its task).
 4. Per block, cells and values with a halo: the in-memory cross-edge pass on the
    block (every edge between two cells, seen from its smaller cell's voxel, with its
@@ -30,12 +30,19 @@ from __future__ import annotations
 
 import os
 import shutil
-import threading
+from dataclasses import dataclass
 
 import numpy as np
 
-from . import _morse_block_kernels as kernels
-from ._halo import block_starts, with_halo
+from .. import _atomic
+from .._block_hooks import BlockHooks
+from .._halo import block_starts, with_halo
+from . import _block_kernels as kernels
+from . import _kernels
+from ._edges import _cross_edges, _saddle_order
+from ._graph import _Neighbourhood, grid_offsets
+from ._hierarchy import MorseHierarchy
+from ._phases import _Phases
 
 __all__ = ["dask_descending_complex"]
 
@@ -80,7 +87,7 @@ def _summary_of_block(halo, origin, shape, offsets, masked, ends_file=None):
     `ends_file`: also keep every voxel's path end there (for `_cells_of_ends`)."""
     result, values = _ascend(halo, origin, shape, offsets, masked)
     if ends_file is not None:
-        _save_atomically(ends_file, result)
+        _atomic.write_atomically(ends_file, np.save, result)
     a, b, c = result.shape
     local = np.arange(result.size).reshape(result.shape)
     gids = ((origin[0] + local // (b * c)) * shape[1] + origin[1] + (local // c) % b) * shape[2] \
@@ -106,15 +113,6 @@ def _resolve(keys, ends):
     raise RuntimeError("blockwise Morse: path ends did not resolve (a bug)")
 
 
-def _save_atomically(path, array):
-    """np.save to `path` by way of a temporary file: a killed run leaves no partial file
-    (the ascent stage's summary is saved after this, so a finished summary implies
-    its ends)."""
-    temporary = f"{path}.{os.getpid()}.{threading.get_ident()}.tmp.npy"
-    np.save(temporary, array)
-    os.replace(temporary, path)
-
-
 def _cells_of_block(halo, origin, shape, offsets, masked, keys, ids):
     """Stage 3: the maximum id of every owned voxel, from the block's own table
     (`_block_tables`); -1 outside the mask."""
@@ -136,7 +134,8 @@ def _block_tables(summaries, layer_keys, layer_ends, maxima_sorted, maxima_ids):
     exits). Each block's task then carries its own small table, not the whole
     volume's outer layers and maxima (which every worker would otherwise hold)."""
     tables = []
-    for own, _, _, ends in summaries:
+    for summary in summaries:
+        own, ends = summary.maxima, summary.ends
         exits = np.unique(-1 - ends[ends < 0])
         reached = layer_ends[np.searchsorted(layer_keys, exits)]
         keys = np.concatenate([own, exits])
@@ -157,9 +156,6 @@ def _pairs_of_block(halo_values, halo_cells, origin, shape, offsets):
     one of them. Cells are renumbered in increasing order (the pairs and ties keep the
     in-memory order), the highest saddle per pair is sorted as in memory and
     `spanning_edges` keeps the block's forest."""
-    from . import _morse_kernels
-    from .morse import _cross_edges, _Neighbourhood, _saddle_order
-
     values = np.ascontiguousarray(halo_values, dtype=np.float64)
     cells, local = np.unique(halo_cells, return_inverse=True)
     strides = np.array([s // values.itemsize for s in values.strides], dtype=np.int64)
@@ -172,10 +168,10 @@ def _pairs_of_block(halo_values, halo_cells, origin, shape, offsets):
         return nothing, nothing, np.zeros(0, dtype=gid_type), np.zeros(0)
     graph = _Neighbourhood(values.ravel(), owned, True, offsets @ strides,
                            np.zeros(1, np.int64), np.zeros(1, np.int64), values.shape)
-    a, b, saddle = _cross_edges(_morse_kernels, graph, local.ravel(), len(cells))
+    a, b, saddle = _cross_edges(_kernels, graph, local.ravel(), len(cells))
     order = _saddle_order(graph.values[saddle], saddle, a, b)
     keep = np.zeros(len(a), dtype=bool)
-    _morse_kernels.spanning_edges(a, b, order, len(cells), keep)
+    _kernels.spanning_edges(a, b, order, len(cells), keep)
     a, b, saddle = a[keep], b[keep], saddle[keep]
     i, j, k = np.unravel_index(saddle, values.shape)
     gids = ((origin[0] + i - 1) * shape[1] + origin[1] + j - 1) * shape[2] + origin[2] + k - 1
@@ -204,33 +200,120 @@ def _gather(blocks, compute, stage) -> list:
     return [block.flat[0] for block in results]      # each a 1x1x1 object array
 
 
-def dask_descending_complex(field, connectivity="kuhn", mask=None, persist=None, wrap=None,
-                            compute=None, reread=False, ends_folder=None):
+@dataclass
+class _Ascent:
+    """Stage 1 of one block: its maxima (gids) and their values, its outer layer's
+    voxels (gids) and where their paths end (a gid, or -1 - gid of the exit voxel in a
+    neighbouring block). Fields are dropped (None) once joined on the client."""
+
+    maxima: np.ndarray | None
+    values: np.ndarray | None
+    layer: np.ndarray | None
+    ends: np.ndarray | None
+
+
+@dataclass
+class _Forest:
+    """Stage 4 of one block: the edges (a, b, saddle gid, saddle value) of its part of
+    the cell graph's maximum spanning forest."""
+
+    a: np.ndarray | None
+    b: np.ndarray | None
+    saddle: np.ndarray | None
+    value: np.ndarray | None
+
+
+@dataclass
+class _Maxima:
+    """Stage 2, on the client: every maximum (gid) and its value, by decreasing
+    (value, index) (a maximum's id is its position), and the index type of the ids."""
+
+    gids: np.ndarray
+    values: np.ndarray
+    index_type: type
+
+
+@dataclass
+class _Grid:
+    """What every per-block function of a build needs: the field's shape, the grid's
+    flat offsets, the blocks' first indices, the mask flag, the scratch folder."""
+
+    shape: np.ndarray
+    offsets: np.ndarray
+    starts: list
+    masked: bool
+    scratch: str | None
+
+    def origin(self, block_id):
+        return np.array([self.starts[d][block_id[d]] for d in range(3)], dtype=np.int64)
+
+    def ends_file(self, block_id):
+        if self.scratch is None:
+            return None
+        return os.path.join(self.scratch, "_".join(map(str, block_id)) + ".npy")
+
+
+def dask_descending_complex(field, connectivity="kuhn", mask=None, hooks=None):
     """`descending_complex` of a 3-D Dask array (see the module docstring).
 
     `mask`: a boolean array (numpy or Dask) of the field's shape, as in memory
     (DESIGN.md section 9): the blocks see -inf outside it, so no edge leaves it;
     cells are -1 there and cuts label it 0.
 
-    Options of the blockwise pipeline (`volseg.blockwise`): `persist` (a function
-    taking the lazy cells and returning them stored, e.g. written to Zarr and read
-    back) computes the cells once instead of in every later pass (edges, labels);
-    `wrap(stage, function)` wraps each per-block function (to keep finished blocks on
-    disk); `compute(*collections, stage=name)` replaces `dask.compute` (to show
-    progress); `reread`: the field's blocks are cheap to make again (read from a
-    store), so each is made again for its halo rather than kept waiting for it
-    (`volseg._halo`; the stored cells are always reread); `ends_folder`: a folder
-    where the ascent pass keeps each block's path ends (8 bytes per voxel), so that
-    the cells pass reads them instead of climbing again from the halos (removed once
-    `persist` has stored the cells)."""
-    import dask
+    `hooks` (`volseg._block_hooks.BlockHooks`, from the blockwise pipeline): ``wrap``
+    keeps each finished block on disk; ``compute`` runs a stage (with progress);
+    ``store`` computes the cells once into storage instead of in every later pass
+    (edges, labels); ``reread``: the field's blocks are cheap to make again, so each
+    is made again for its halo rather than kept waiting for it (the stored cells are
+    always reread); ``scratch``: a folder where the ascent keeps each block's path
+    ends (8 bytes per voxel), so that the cells pass reads them instead of climbing
+    again (removed once the cells are stored)."""
+    hooks = hooks or BlockHooks()
+    values, mask = _checked_field(field, mask)
+    phases = _Phases()
+    grid = _Grid(np.array(field.shape, dtype=np.int64),
+                 np.ascontiguousarray(grid_offsets(3, connectivity), dtype=np.int64),
+                 block_starts(values.chunks), mask is not None, hooks.scratch)
+    if grid.scratch is not None:
+        os.makedirs(grid.scratch, exist_ok=True)
+    halo = with_halo(values, -np.inf, fresh=hooks.reread)
+    ascent = _per_block(hooks.wrap("ascent", lambda h, block_id: _summary_of_block(
+        h, grid.origin(block_id), grid.shape, grid.offsets, grid.masked,
+        grid.ends_file(block_id))), halo)
+    summaries = [_Ascent(*s) for s in _gather(ascent, hooks.compute,
+                                              "Morse: steepest ascent per block")]
+    phases.done("blocks: steepest ascent, path compression")
+    maxima, tables = _maxima_and_tables(summaries, values.chunks)
+    del summaries     # the client keeps only the maxima and the blocks' small tables
+    phases.done("client: exits resolved, maxima ordered")
+    cells = _cells(halo, tables, values.chunks, grid, maxima.index_type, hooks)
+    del tables     # held by the cells' graph only: storing may free them (about 12 B/maximum)
+    if hooks.store is not None:
+        cells = hooks.store("cells", cells)
+        phases.done("blocks: cells (stored)")
+        if grid.scratch is not None:    # every cell is stored: the ends are not read again
+            shutil.rmtree(grid.scratch, ignore_errors=True)
+    halo_cells = with_halo(cells, -1, fresh=hooks.store is not None)
+    pairs = _per_block(hooks.wrap("pairs", lambda h, c, block_id: _pairs_of_block(
+        h, c, grid.origin(block_id), grid.shape, grid.offsets)), halo, halo_cells)
+    forests = [_Forest(*f) for f in _gather(
+        pairs, hooks.compute, "Morse: cross-cell edges and spanning forest per block")]
+    phases.done("blocks: cells and cross-cell edges")
+    young, elder, target, saddle, saddle_values = _union_find(
+        forests, len(maxima.gids), maxima.index_type)
+    del forests
+    phases.done("client: saddle order, union-find")
+    return MorseHierarchy(
+        shape=tuple(int(s) for s in grid.shape), cells=cells, maxima=maxima.gids,
+        values=maxima.values, young=young, elder=elder, target=target, saddle=saddle,
+        saddle_value=saddle_values, mask=mask, _field=field, _connectivity=connectivity,
+        timings=phases.times)
+
+
+def _checked_field(field, mask):
+    """(the field as float64, -inf outside the mask; the mask as a Dask array of the
+    field's chunks, or None), checked."""
     import dask.array as da
-
-    from . import _morse_kernels
-    from .morse import MorseHierarchy, _Phases, _saddle_order, grid_offsets
-
-    wrap = wrap or (lambda stage, function: function)
-    compute = compute or (lambda *collections, stage: dask.compute(*collections))
 
     if field.ndim != 3:
         raise ValueError(f"a Dask `field` must be 3-D, got shape {field.shape}")
@@ -238,91 +321,76 @@ def dask_descending_complex(field, connectivity="kuhn", mask=None, persist=None,
         raise ValueError(f"`field` must hold real numbers, got dtype {field.dtype}")
     if field.size == 0:
         raise ValueError("`field` is empty")
-    phases = _Phases()
-    shape = np.array(field.shape, dtype=np.int64)
-    offsets = np.ascontiguousarray(grid_offsets(3, connectivity), dtype=np.int64)
     values = field.astype(np.float64)
-    masked = mask is not None
-    if masked:
-        mask = da.asarray(mask)
-        if mask.dtype != bool or mask.shape != field.shape:
-            raise ValueError(f"`mask` must be a boolean array of the field's shape {field.shape}, "
-                             f"got {mask.dtype} {mask.shape}")
-        mask = mask.rechunk(field.chunks)
-        values = da.map_blocks(_masked, values, mask, dtype=np.float64)
-    halo = with_halo(values, -np.inf, fresh=reread)
-    starts = block_starts(values.chunks)
+    if mask is None:
+        return values, None
+    mask = da.asarray(mask)
+    if mask.dtype != bool or mask.shape != field.shape:
+        raise ValueError(f"`mask` must be a boolean array of the field's shape {field.shape}, "
+                         f"got {mask.dtype} {mask.shape}")
+    mask = mask.rechunk(field.chunks)
+    return da.map_blocks(_masked, values, mask, dtype=np.float64), mask
 
-    def origin(block_id):
-        return np.array([starts[d][block_id[d]] for d in range(3)], dtype=np.int64)
 
-    def ends_file(block_id):
-        if ends_folder is None:
-            return None
-        return os.path.join(ends_folder, "_".join(map(str, block_id)) + ".npy")
+def _maxima_and_tables(summaries: list, chunks) -> tuple:
+    """Stage 2 on the client: the outer layers' path ends resolved to maxima by
+    pointer jumping, the maxima numbered by decreasing (value, index) as in memory,
+    and each block's own table of maximum ids (as a Dask array of the block grid)."""
+    import dask.array as da
 
-    if ends_folder is not None:
-        os.makedirs(ends_folder, exist_ok=True)
-    summaries = _gather(_per_block(wrap("ascent", lambda h, block_id: _summary_of_block(
-        h, origin(block_id), shape, offsets, masked, ends_file(block_id))), halo), compute,
-        "Morse: steepest ascent per block")
-    phases.done("blocks: steepest ascent, path compression")
-    summaries = [list(s) for s in summaries]     # their columns dropped once joined
-    maxima = np.concatenate([s[0] for s in summaries])
+    maxima = np.concatenate([s.maxima for s in summaries])
     if not len(maxima):
         raise ValueError("`mask` selects no vertex")
-    maxima_values = _joined(summaries, 1)
-    layer_keys, layer_ends = _resolve(_joined(summaries, 2),
-                                      np.concatenate([s[3] for s in summaries]))
+    maxima_values = _joined(summaries, "values")
+    layer_keys, layer_ends = _resolve(_joined(summaries, "layer"),
+                                      np.concatenate([s.ends for s in summaries]))
     order = np.lexsort((maxima, maxima_values))[::-1]       # decreasing (value, index)
     maxima, maxima_values = maxima[order], maxima_values[order]
     index_type = np.int32 if len(maxima) < 2**31 - 1 else np.int64
     by_gid = np.argsort(maxima)
     maxima_sorted, maxima_ids = maxima[by_gid], by_gid.astype(index_type)
-    phases.done("client: exits resolved, maxima ordered")
-
-    grid = tuple(len(c) for c in values.chunks)
-    tables = np.empty(grid, dtype=object)
-    for index, table in zip(np.ndindex(grid), _block_tables(summaries, layer_keys, layer_ends,
-                                                            maxima_sorted, maxima_ids), strict=True):
+    block_grid = tuple(len(c) for c in chunks)
+    tables = np.empty(block_grid, dtype=object)
+    for index, table in zip(np.ndindex(block_grid), _block_tables(
+            summaries, layer_keys, layer_ends, maxima_sorted, maxima_ids), strict=True):
         tables[index] = table
-    del summaries, layer_keys, layer_ends, maxima_sorted, maxima_ids
-    tables = da.from_array(tables, chunks=1, name=False)
+    return (_Maxima(maxima, maxima_values, index_type),
+            da.from_array(tables, chunks=1, name=False))
 
-    if ends_folder is None:      # climb again, from the halos
+
+def _cells(halo, tables, chunks, grid: _Grid, index_type, hooks):
+    """Stage 3, lazy: the maximum id of every voxel, from the path ends kept in the
+    scratch folder, or, without one, by climbing again from the halos."""
+    import dask.array as da
+
+    meta = np.empty((0, 0, 0), index_type)
+    if grid.scratch is None:
         def cells_of(h, table, block_id=None):
-            return _cells_of_block(h, origin(block_id), shape, offsets, masked, *table.flat[0])
+            return _cells_of_block(h, grid.origin(block_id), grid.shape, grid.offsets,
+                                   grid.masked, *table.flat[0])
 
-        cells = halo.map_blocks(wrap("cells", cells_of), tables, dtype=index_type,
-                                chunks=values.chunks, meta=np.empty((0, 0, 0), index_type))
-    else:                        # the ends the ascent pass kept
-        def cells_of(table, block_id=None):
-            try:
-                ends = np.load(ends_file(block_id))
-            except OSError:
-                raise RuntimeError(f"block {block_id}'s path ends were expected in "
-                                   f"{ends_folder} but are not there") from None
-            return _cells_of_ends(ends, *table.flat[0])
+        return halo.map_blocks(hooks.wrap("cells", cells_of), tables, dtype=index_type,
+                               chunks=chunks, meta=meta)
 
-        cells = da.map_blocks(wrap("cells", cells_of), tables, dtype=index_type,
-                              chunks=values.chunks, meta=np.empty((0, 0, 0), index_type))
-    del tables     # held by the cells' graph only: `persist` may free them (about 12 B/maximum)
-    if persist is not None:
-        cells = persist(cells)
-        phases.done("blocks: cells (stored)")
-        if ends_folder is not None:    # every cell is stored: the ends are not read again
-            shutil.rmtree(ends_folder, ignore_errors=True)
-    halo_cells = with_halo(cells, -1, fresh=persist is not None)
-    pairs = _gather(_per_block(wrap("pairs", lambda h, c, block_id: _pairs_of_block(
-        h, c, origin(block_id), shape, offsets)), halo, halo_cells), compute,
-        "Morse: cross-cell edges and spanning forest per block")
-    phases.done("blocks: cells and cross-cell edges")
-    # The union of the blocks' forests holds the whole graph's forest: Kruskal over it
-    # makes the in-memory merges (a pair found by two blocks: the lower edge is skipped).
-    # Joined one column at a time, each block's copy dropped as it goes (the peak is one
-    # column more than the edges, not twice the edges).
-    pairs = [list(p) for p in pairs]
-    edge_a, edge_b, edge_v, edge_f = (_joined(pairs, k) for k in range(4))
+    def cells_of_kept_ends(table, block_id=None):
+        try:
+            ends = np.load(grid.ends_file(block_id))
+        except OSError:
+            raise RuntimeError(f"block {block_id}'s path ends were expected in "
+                               f"{grid.scratch} but are not there") from None
+        return _cells_of_ends(ends, *table.flat[0])
+
+    return da.map_blocks(hooks.wrap("cells", cells_of_kept_ends), tables, dtype=index_type,
+                         chunks=chunks, meta=meta)
+
+
+def _union_find(forests: list, n_maxima: int, index_type) -> tuple:
+    """Stage 5 on the client: the union of the blocks' forests holds the whole graph's
+    forest, so Kruskal over it in the in-memory order makes the in-memory merges (a
+    pair found by two blocks: the lower edge is skipped). Joined one column at a
+    time, each block's copy dropped as it goes (the peak is one column more than the
+    edges, not twice the edges). Returns (young, elder, target, saddle, saddle value)."""
+    edge_a, edge_b, edge_v, edge_f = (_joined(forests, k) for k in ("a", "b", "saddle", "value"))
     edge_a, edge_b = edge_a.astype(index_type, copy=False), edge_b.astype(index_type, copy=False)
     order = _saddle_order(edge_f, edge_v, edge_a, edge_b)
     edge_a = edge_a[order]      # one column at a time: one copy alive, not four
@@ -330,28 +398,19 @@ def dask_descending_complex(field, connectivity="kuhn", mask=None, persist=None,
     edge_v = edge_v[order]
     edge_f = edge_f[order]
     del order
-    n_maxima = len(maxima)
     out = [np.empty(max(n_maxima - 1, 0), dtype=t) for t in (np.int32, np.int32, np.int32, np.int64)]
     # Kruskal records each event's edge (its index in place of a saddle): the events'
     # saddles and their values are then two gathers.
     edge = np.arange(len(edge_a), dtype=index_type if len(edge_a) < 2**31 - 1 else np.int64)
-    n_events = _morse_kernels.kruskal(edge_a, edge_b, edge, n_maxima, *out)
+    n_events = _kernels.kruskal(edge_a, edge_b, edge, n_maxima, *out)
     del edge_a, edge_b, edge
     young, elder, target, event_edge = (x[:n_events].copy() for x in out)
-    del out
-    saddle, saddle_values = edge_v[event_edge].astype(np.int64), edge_f[event_edge]
-    del edge_v, edge_f, event_edge
-    phases.done("client: saddle order, union-find")
-    return MorseHierarchy(
-        shape=tuple(int(s) for s in shape), cells=cells, maxima=maxima,
-        values=maxima_values, young=young, elder=elder, target=target, saddle=saddle,
-        saddle_value=saddle_values, mask=mask, _field=field, _connectivity=connectivity,
-        timings=phases.times)
+    return young, elder, target, edge_v[event_edge].astype(np.int64), edge_f[event_edge]
 
 
-def _joined(parts, k):
-    """Column k of every block's result, concatenated; each block's copy is dropped."""
-    column = np.concatenate([p[k] for p in parts])
+def _joined(parts, name: str):
+    """Field `name` of every block's record, concatenated; each block's copy is dropped."""
+    column = np.concatenate([getattr(p, name) for p in parts])
     for p in parts:
-        p[k] = None
+        setattr(p, name, None)
     return column

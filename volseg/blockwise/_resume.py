@@ -20,24 +20,13 @@ from __future__ import annotations
 import json
 import os
 import shutil
-import threading
 from pathlib import Path
 
 import numpy as np
 
+from .._atomic import write_atomically
+
 __all__ = ["WorkFolder"]
-
-
-def _write_atomically(path: str, save, *args, **kwargs):
-    """``save(file, *args, **kwargs)`` into a temporary file beside `path`, then renamed
-    to it: a process killed while writing leaves no partial `path`, and its leftover
-    (``<path>.<pid>.<thread>.tmp``) does not match the ``*.npz`` that counts finished
-    blocks. (`volseg._morse_blocks` keeps its own few lines for the path ends: the
-    Morse stage imports nothing of volseg outside its family.)"""
-    temporary = f"{path}.{os.getpid()}.{threading.get_ident()}.tmp"
-    with open(temporary, "wb") as file:
-        save(file, *args, **kwargs)
-    os.replace(temporary, path)
 
 
 class WorkFolder:
@@ -96,7 +85,7 @@ class _Cached:
         result = self.function(*blocks, block_id=block_id)
         items = ({"array": result} if isinstance(result, np.ndarray)
                  else {f"item{i}": np.asarray(r) for i, r in enumerate(result)})
-        _write_atomically(path, np.savez, **items)
+        write_atomically(path, np.savez, **items)
         return result
 
 

@@ -17,6 +17,8 @@ Sweeping the cell-boundary vertices in value order instead was 3x slower at 256^
 import numba
 import numpy as np
 
+from .._union_find import find_root
+
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def _higher(values, u, v):
@@ -66,16 +68,6 @@ def relabel(vertices, cell, ids):
         cell[v] = ids[cell[v]]
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
-def find_root(parent, x):
-    """Root of x in a union-find forest, halving the path on the way (shared with
-    `_star_kernels`)."""
-    while parent[x] != x:
-        parent[x] = parent[parent[x]]
-        x = parent[x]
-    return x
-
-
 @numba.njit(cache=True, nogil=True)
 def regions_of_cut(young, target, merged, region):
     """region[m] for each maximum m of a cut: the events with `merged` join the young
@@ -104,7 +96,7 @@ def regions_of_cut(young, target, merged, region):
 
 @numba.njit(cache=True, nogil=True)
 def spanning_edges(edge_a, edge_b, order, n_cells, keep):
-    """The blockwise build's per-block forest (`_morse_blocks._pairs_of_block`):
+    """The blockwise build's per-block forest (`_blocks._pairs_of_block`):
     keep[e] = True for the edges of the maximum spanning forest, Kruskal from the
     last of `order` (the highest edge) down, over cells 0..n_cells-1. An edge left
     out closes a cycle of higher edges of the same block, so it merges nothing in the

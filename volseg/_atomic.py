@@ -1,0 +1,42 @@
+"""Atomic file writes, a leaf shared by the io writers, the work folder and the
+blockwise Morse build: a file appears by rename once complete, so a process killed
+while writing leaves no partial file under the final name."""
+
+from __future__ import annotations
+
+import os
+import tempfile
+import threading
+from pathlib import Path
+
+__all__ = ["write_atomically", "temporary_beside"]
+
+
+def temporary_beside(path) -> Path:
+    """A new temporary file beside `path` (same folder, so renaming it is atomic),
+    readable like any file the user's umask allows (mkstemp makes 0600)."""
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)
+    os.close(fd)
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp, 0o666 & ~umask)
+    return Path(tmp)
+
+
+def write_atomically(path, save, *args, **kwargs) -> None:
+    """``save(file, *args, **kwargs)`` into a temporary file beside `path`, then renamed
+    to it. The temporary (``<path>.<pid>.<thread>.tmp``) matches no ``*.npz`` or
+    ``*.npy`` count of finished blocks, so a leftover of a killed run never looks
+    finished."""
+    temporary = f"{path}.{os.getpid()}.{threading.get_ident()}.tmp"
+    try:
+        with open(temporary, "wb") as file:
+            save(file, *args, **kwargs)
+        os.replace(temporary, path)
+    except BaseException:
+        try:
+            os.unlink(temporary)
+        except OSError:
+            pass
+        raise

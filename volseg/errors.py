@@ -1,0 +1,37 @@
+"""Every error volseg raises on purpose, in one place (a leaf).
+
+All are `ValueError` subclasses: bad input or usage, never a bug. The command line
+turns each into one line on stderr and exit code 2; a Python caller can catch
+`VolsegError` for all of them.
+"""
+
+__all__ = ["VolsegError", "UsageError", "VolumeFileError", "OutputError", "DatasetError",
+           "EngineError"]
+
+
+class VolsegError(ValueError):
+    """Base of the errors below."""
+
+
+class UsageError(VolsegError):
+    """An option or argument that cannot be used as given (exit code 2)."""
+
+
+class VolumeFileError(VolsegError):
+    """A volume file that cannot be read as it is: it names the file and the field.
+
+    Raised by every reader for every malformed input (truncated data, a header field
+    that is missing or out of range, an unknown type), never a bare numpy error.
+    """
+
+
+class OutputError(VolsegError):
+    """The outputs cannot be written as asked (exist, locked, not a file)."""
+
+
+class DatasetError(VolsegError):
+    """A dataset cannot be had: unknown name, offline, or a checksum mismatch."""
+
+
+class EngineError(VolsegError):
+    """The Dask engine cannot be started or reached as asked."""

@@ -1,0 +1,266 @@
+"""Files in, output sets out: what ``volseg segment`` and ``volseg isosurface`` do, as
+library calls.
+
+- `segment_files`: read and check every input, lock and check every output set,
+  then segment and write each (the command line's ``segment``);
+- `segment_to_files`: one volume into an entered `volseg.io.OutputSet`, in memory or,
+  for a lazily read volume, through the blockwise storage (`volseg.blockwise`): the
+  same stage sequence (`volseg.segment.run_stages`) and the same writer
+  (`volseg.outputs.write_result_files`) either way;
+- `series_to_files`, `segment_series_files`: the space-time isosurface of a series;
+- `load_volume`, `load_for_budget`, `chunked`: inputs as the command line reads them.
+
+Every refusal is a `volseg.errors.VolsegError` (a ValueError) naming the file, the
+field or the argument.
+"""
+
+from __future__ import annotations
+
+import time
+from contextlib import ExitStack
+from pathlib import Path
+
+import numpy as np
+
+from . import _validate
+from .errors import UsageError
+from .io import Frame, OutputSet
+from .outputs import files_sha256, output_names, result_title, summary, write_result_files
+from .segment import InMemory, SegmentRequest, run_stages
+
+__all__ = ["segment_files", "segment_to_files", "series_to_files", "segment_series_files",
+           "load_volume", "load_for_budget", "chunked", "output_sets"]
+
+
+def _quiet(message):
+    """The default `say`: no progress."""
+
+
+def load_volume(name, shape=None, dtype=None, allow_external_data=False, chunks=None):
+    """The `Volume` of a volume file or a named dataset (`volseg.datasets.resolve`); lazy
+    (a Dask array of `chunks`) when `chunks` is given."""
+    from .datasets import resolve
+    from .io import read_volume
+
+    return read_volume(resolve(name), shape=shape, dtype=dtype,
+                       allow_external_data=allow_external_data, chunks=chunks)
+
+
+def load_for_budget(name, budget: int, *, shape=None, dtype=None, allow_external_data=False,
+                    chunks=None, say=_quiet):
+    """`load_volume`, lazily (the blockwise path, `DEFAULT_CHUNKS`) when `chunks` is not
+    given but the in-memory path would need more than `budget` bytes
+    (`IN_MEMORY_BYTES_PER_VOXEL` per voxel). The file size bounds the voxel count from
+    above, so small files are read as before; compressed files are not estimated
+    (their size says too little)."""
+    from .blockwise import DEFAULT_CHUNKS, IN_MEMORY_BYTES_PER_VOXEL
+    from .datasets import resolve
+
+    options = {"shape": shape, "dtype": dtype, "allow_external_data": allow_external_data}
+    if chunks is not None:
+        return load_volume(name, **options, chunks=chunks)
+    path = resolve(name)       # a dataset name is verified once, here
+    try:
+        size = path.stat().st_size if path.is_file() else 0
+    except OSError:
+        size = 0      # read_volume names the problem
+    if size * IN_MEMORY_BYTES_PER_VOXEL > budget and not path.name.lower().endswith(".gz"):
+        volume = load_volume(str(path), **options, chunks=DEFAULT_CHUNKS)
+        need = int(np.prod(volume.shape)) * IN_MEMORY_BYTES_PER_VOXEL
+        if need > budget:
+            say(f"{volume.name}: about {need / 2**30:.3g} GiB in memory exceeds the memory limit "
+                f"of {budget / 2**30:.3g} GiB: segmenting block by block in {DEFAULT_CHUNKS}^3 "
+                "chunks (--chunks N to choose, --memory-limit to change the limit)")
+            return volume
+    return load_volume(str(path), **options)
+
+
+def chunked(volume, size: int):
+    """A lazily read `volume` with its data in `size`^3 chunks (clipped to the shape:
+    a Zarr store's own chunks are rechunked)."""
+    from .io import Volume
+
+    if size < 2:
+        raise UsageError(f"--chunks must be at least 2 voxels, got {size}")
+    if any(size > n for n in volume.shape):
+        raise UsageError(f"--chunks {size} is larger than the volume {volume.path or volume.name} "
+                         f"along an axis (shape {volume.shape}); use at most {min(volume.shape)}")
+    return Volume(volume.data.rechunk(size), frame=volume.frame, name=volume.name,
+                  source=volume.source, path=volume.path, files=volume.files)
+
+
+def _is_lazy(volume) -> bool:
+    return _validate.is_lazy(volume.data)
+
+
+def output_sets(volumes, out_dir, *, force=False, wait=False, persistence_plot=False) -> list:
+    """One `OutputSet` per volume (not yet entered); two inputs with one stem are
+    refused before anything is computed."""
+    seen = {}
+    for volume in volumes:
+        if volume.name in seen:
+            raise UsageError(
+                f"{seen[volume.name]} and {volume.path or volume.name} would both write "
+                f"{Path(out_dir) / volume.name}_*; segment them into different folders")
+        seen[volume.name] = volume.path or volume.name
+    return [OutputSet(out_dir, v.name, output_names(v.name, persistence_plot, _is_lazy(v),
+                                                    int(np.prod(v.shape))),
+                      force=force, wait=wait) for v in volumes]
+
+
+def segment_files(volumes, out_dir, *, force=False, wait=False, persistence_plot=False,
+                  engine=None, say=_quiet, **options) -> list[dict]:
+    """Lock and check every output set, then segment and write each volume.
+
+    Parameters
+    ----------
+    volumes : list of Volume
+        As read (`load_volume`, `load_for_budget`); lazy ones take the blockwise path.
+    out_dir : path
+    force, wait, persistence_plot
+        Overwrite existing sets; wait for another writer's lock; also write the
+        persistence curve alone.
+    engine : volseg.blockwise.engine.Engine, optional
+        Entered here, after the sets are locked, when a volume is lazy.
+    **options
+        Of `segment_to_files`.
+
+    Returns
+    -------
+    list of dict
+        The summaries, in input order.
+    """
+    sets = output_sets(volumes, out_dir, force=force, wait=wait,
+                       persistence_plot=persistence_plot)
+    summaries = []
+    with ExitStack() as stack:
+        for outputs in sets:
+            stack.enter_context(outputs)
+            for line in outputs.recovered:
+                say(f"{outputs.folder}: {line}")
+        if engine is not None and any(_is_lazy(v) for v in volumes):
+            # Started (or reached) after the outputs are locked and checked, before
+            # anything is computed: an unreachable scheduler writes nothing.
+            stack.enter_context(engine)
+            say(f"blockwise engine: {engine.describe()}")
+        for number, (volume, outputs) in enumerate(zip(volumes, sets, strict=True), 1):
+            tag = "" if len(volumes) == 1 else f"[{number}/{len(volumes)}] "
+            step = (lambda t: lambda message: say(t + message))(tag)
+            info = segment_to_files(volume, outputs, engine=engine, say=step, **options)
+            summaries.append(info)
+            step(f"{volume.name}: wrote "
+                 f"{', '.join(Path(p).name for p in info['outputs'].values())}")
+    return summaries
+
+
+def segment_to_files(volume, outputs, *, operator="weighted", n_regions=None,
+                     min_persistence=None, value_scale=None, noise=None, seed=0, mask=None,
+                     smooth_sigma=0.0, padding="linear", engine=None, say=_quiet) -> dict:
+    """Segment `volume` and write its output set (an entered `OutputSet` named by
+    `output_names`); returns the summary. A lazily read volume (its data a Dask
+    array) takes the blockwise path: each stage stored in the set's staging files and
+    a work folder that lets a killed run resume (`volseg.blockwise`). `noise`: percent
+    Gaussian noise of the value range (`volseg.noise.add_value_noise`), in memory only.
+    """
+    started = time.perf_counter()
+    lazy = _is_lazy(volume)
+    if lazy:
+        data = _validate.lazy_volume_array(volume.data)
+        if noise:
+            raise UsageError("--noise needs the volume in memory; drop --chunks")
+    else:
+        from .noise import add_value_noise
+
+        data = np.asarray(volume)
+        if noise:
+            data = add_value_noise(data, noise, seed=seed)
+    request = SegmentRequest.checked(
+        operator=operator, min_persistence=min_persistence, n_regions=n_regions,
+        value_scale=value_scale, spacing=volume.spacing, padding=padding, mask=mask,
+        smooth_sigma=smooth_sigma)
+    name, checksum = volume.name, files_sha256(volume.files)
+    frame = volume.frame or Frame.from_spacing(request.spacing)
+    done = {}
+
+    def write(paths):
+        storage = _storage(volume, data, request, paths, outputs, checksum, engine, say)
+        blocks = f" in {'x'.join(str(max(c)) for c in data.chunks)} blocks" if lazy else ""
+        say(f"{name}: curvature ({request.operator.name}) and Morse complex of a "
+            f"{'x'.join(map(str, data.shape))} volume{blocks}")
+        result, value_range = run_stages(data, request, storage)
+        say(f"{name}: {result.n_regions} regions{result.mask.phrase()} from "
+            f"{len(result.hierarchy.maxima)} maxima; writing")
+        info = summary(result, name=name, source=volume.path, checksum=checksum,
+                       files=volume.files, frame=frame, noise=noise, seed=seed,
+                       requested_regions=n_regions)
+        if lazy:
+            info["blockwise"] = storage.describe(result.hierarchy)
+        info["timings_s"]["total"] = round(time.perf_counter() - started, 4)
+        info["outputs"] = {kind: str(path) for kind, path in outputs.targets.items()}
+        write_result_files(paths, result, data, info, frame=frame,
+                           title=result_title(name, result, blockwise=lazy),
+                           value_range=value_range)
+        done["info"], done["storage"] = info, storage
+
+    outputs.commit(write)
+    done["storage"].finish()
+    return done["info"]
+
+
+def _storage(volume, data, request, paths, outputs, checksum, engine, say):
+    if not _is_lazy(volume):
+        return InMemory()
+    from .blockwise import BlockwiseStorage
+
+    if request.mask not in (None, "none"):
+        say(f"{volume.name}: mask {request.mask}")
+    return BlockwiseStorage(data, request, paths, folder=outputs.folder, stem=outputs.stem,
+                            checksum=checksum, frame=volume.frame, engine=engine,
+                            say=lambda message: say(f"{volume.name}: {message}"))
+
+
+def series_to_files(series, level, outputs, *, time_scale=1.0, relax=10, operator="weighted",
+                    n_regions=None, min_persistence=None, boundary="partial", smooth_rounds=10,
+                    say=_quiet) -> dict:
+    """Segment the space-time isosurface of `series` and write its output set (an
+    entered `OutputSet` named by `volseg.outputs.spacetime.series_output_names`);
+    returns the summary."""
+    from .outputs.spacetime import series_summary, write_series_segmentation
+    from .spacetime import segment_series
+
+    started = time.perf_counter()
+    say(f"{series.name}: isosurface at {level:g} of a {'x'.join(map(str, series.shape))} "
+        f"series, {relax} relaxation rounds, {operator} curvature, Morse complex")
+    result = segment_series(series.data, level, spacing=series.spacing, time_scale=time_scale,
+                            relax=relax, operator=operator, n_regions=n_regions,
+                            min_persistence=min_persistence, boundary=boundary,
+                            smooth_rounds=smooth_rounds)
+    slices = result.slices()
+    seg = result.segmentation
+    say(f"{series.name}: {len(result.surface.vertices)} vertices, "
+        f"{len(result.surface.simplices)} tetrahedra; {seg.n_regions} regions from "
+        f"{len(seg.hierarchy.maxima)} maxima; writing")
+    info = series_summary(result, slices, name=series.name,
+                          source=series.files[0] if series.files else None,
+                          checksum=files_sha256(series.files), files=series.files)
+    info["timings_s"]["total"] = round(time.perf_counter() - started, 4)
+    title = (f"{series.name}: isosurface {level:g} in space-time, {seg.n_regions} regions "
+             f"({seg.operator.replace('_', '-')} curvature)")
+    return write_series_segmentation(outputs, result, slices, info, title=title)
+
+
+def segment_series_files(series, level, out_dir, *, force=False, wait=False, say=_quiet,
+                         **options) -> dict:
+    """Lock and check the output set ``<name>_iso_*`` of `series` in `out_dir`, then
+    `series_to_files`; returns the summary."""
+    from .outputs.spacetime import series_output_names
+
+    names = series_output_names(series.name, series.shape[-1])
+    with OutputSet(out_dir, f"{series.name}_iso", names, force=force, wait=wait) as outputs:
+        for line in outputs.recovered:
+            say(f"{outputs.folder}: {line}")
+        info = series_to_files(series, level, outputs, say=say, **options)
+    say(f"{series.name}: wrote {Path(info['outputs']['mesh']).name}, "
+        f"{Path(info['outputs']['pvd']).name} (+{series.shape[-1]} .vtu), "
+        f"{Path(info['outputs']['summary']).name}, {Path(info['outputs']['preview']).name}")
+    return info

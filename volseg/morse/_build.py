@@ -1,0 +1,144 @@
+"""The in-memory build of the descending complex: steepest ascent and path
+compression to cells, one edge per pair of adjacent cells with its highest saddle,
+then the elder-rule union-find (DESIGN.md section 5)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from . import _kernels as kernels
+from ._edges import _cross_edges, _saddle_order
+from ._graph import _Neighbourhood, _neighbourhood, _validate_field
+from ._hierarchy import MorseHierarchy
+from ._phases import _Phases
+
+__all__ = ["descending_complex"]
+
+
+def _descending_cells(kernels, graph: _Neighbourhood, phases: _Phases):
+    """(cell per node, -1 off the vertices; maxima nodes by decreasing value): cell[v] is
+    the id of the maximum v's steepest ascent reaches."""
+    index_type = np.int32 if len(graph.values) < 2**31 - 1 else np.int64
+    up = np.empty(len(graph.values), dtype=index_type)
+    kernels.steepest_ascent(graph.values, graph.vertices, graph.grid, graph.offsets,
+                            graph.indptr, graph.indices, up)
+    phases.done("steepest ascent")
+    cell = np.full(len(graph.values), -1, dtype=index_type)
+    kernels.resolve_cells(graph.vertices, up, cell)
+    phases.done("path compression")
+    maxima = kernels.roots(graph.vertices, up)
+    # Maximum ids by decreasing value (simulation of simplicity: then by index).
+    maxima = maxima[np.lexsort((maxima, graph.values[maxima]))[::-1]]
+    up[maxima] = np.arange(len(maxima), dtype=index_type)  # up is free now: root -> id
+    kernels.relabel(graph.vertices, cell, up)
+    phases.done("maxima order and relabel")
+    return cell, maxima
+
+
+@dataclass
+class _MergeEvents:
+    """Elder-rule merges, in sweep order: `young` dies into `elder`'s component at the
+    saddle node `saddle`; `target` is the cell across the saddle edge."""
+
+    young: NDArray[np.int32]
+    elder: NDArray[np.int32]
+    target: NDArray[np.int32]
+    saddle: NDArray[np.int64]
+
+
+def _merge_events(kernels, graph: _Neighbourhood, cell, n_maxima,
+                  phases: _Phases) -> _MergeEvents:
+    """One edge per pair of adjacent cells (its highest saddle), sorted by (saddle value,
+    saddle vertex, pair), then one Kruskal over them from the highest saddle down."""
+    edge_a, edge_b, edge_v = _cross_edges(kernels, graph, cell, n_maxima)
+    phases.done("cross-cell edges")
+    order = _saddle_order(graph.values[edge_v], edge_v, edge_a, edge_b)
+    phases.done("saddle order (sort, ties)")
+    sorted_edges = [np.empty_like(edge_a), np.empty_like(edge_b), np.empty_like(edge_v)]
+    kernels.gather(order, edge_a, edge_b, edge_v, *sorted_edges)
+    del order, edge_a, edge_b, edge_v
+    out = [np.empty(max(n_maxima - 1, 0), dtype=t) for t in (np.int32, np.int32, np.int32, np.int64)]
+    n_events = kernels.kruskal(*sorted_edges, n_maxima, *out)
+    phases.done("union-find")
+    return _MergeEvents(*(a[:n_events].copy() for a in out))
+
+
+def descending_complex(field: ArrayLike, *, adjacency=None, connectivity="kuhn",
+                       mask=None, block_hooks=None) -> "MorseHierarchy":
+    """Descending Morse complex of `field` and its persistence hierarchy.
+
+    Parameters
+    ----------
+    field : ndarray of real, or 3-D Dask array
+        On a grid: an N-d array (1-D, 2-D or 3-D), neighbours by `connectivity`.
+        On a graph: a 1-D array, one value per vertex, with `adjacency`. A Dask
+        array is built block by block (DESIGN.md section 10), the same result.
+    adjacency : scipy sparse matrix, (E, 2) int array or networkx graph, optional
+        Vertex adjacency (symmetrised; self-loops ignored). Structure, not weight:
+        any stored nonzero of a sparse matrix is an edge, whatever its value or
+        sign. For a networkx graph, ``field[i]`` is the value of the i-th node of
+        ``list(graph.nodes)``.
+    connectivity : {'kuhn', 4, 8, 6, 18, 26, 2}
+        Grid neighbourhood (see `grid_offsets`); ignored with `adjacency`.
+    mask : bool ndarray (or Dask array) of the field's shape, optional
+        The vertices that take part (DESIGN.md section 9): the graph is restricted
+        to them (an edge only between two masked vertices), so maxima, cells,
+        saddles and persistence are those of the foreground, exactly as with the
+        explicit restricted adjacency; values outside the mask are ignored (they may
+        be NaN). Cuts label unmasked vertices 0 and regions 1..k.
+    block_hooks : volseg._block_hooks.BlockHooks, optional
+        For a Dask `field`: how its blocks are kept and computed (the blockwise
+        pipeline's work folder and progress); default plain Dask.
+
+    Returns
+    -------
+    MorseHierarchy
+
+    Raises
+    ------
+    ValueError
+        NaN or infinite values (inside the mask), a non-numeric field, adjacency of
+        the wrong size or with out-of-range vertices, an unknown connectivity, a
+        mask of the wrong shape or type, or one that selects nothing.
+    """
+    if type(field).__module__.startswith("dask."):
+        if adjacency is not None:
+            raise ValueError("a Dask `field` is segmented on its grid; compute it (numpy) "
+                             "to use `adjacency`")
+        from ._blocks import dask_descending_complex
+
+        return dask_descending_complex(field, connectivity, mask=mask, hooks=block_hooks)
+    phases = _Phases()
+    values, mask = _validate_field(field, mask, adjacency)
+    graph = _neighbourhood(values, mask, adjacency, connectivity)
+    phases.done("checks and neighbourhood")
+    cell, maxima = _descending_cells(kernels, graph, phases)
+    events = _merge_events(kernels, graph, cell, len(maxima), phases)
+    shape = values.shape
+    if graph.grid:
+        cells = cell.reshape(graph.padded_shape)[(slice(1, -1),) * values.ndim].astype(np.int32)
+    else:
+        cells = cell.astype(np.int32, copy=False)
+    del cell
+    maxima = graph.to_field(maxima, shape)
+    saddles = graph.to_field(events.saddle, shape)
+    phases.done("cells and indices out")
+    return MorseHierarchy(
+        shape=shape,
+        cells=cells,
+        maxima=maxima,
+        values=values.ravel()[maxima],
+        young=events.young,
+        elder=events.elder,
+        target=events.target,
+        saddle=saddles,
+        saddle_value=values.ravel()[saddles],
+        mask=mask,
+        _field=values,
+        _adjacency=None if graph.grid else (graph.indptr, graph.indices),
+        _connectivity=connectivity if graph.grid else None,
+        timings=phases.times,
+    )

@@ -1,0 +1,27 @@
+"""The files of one segmentation: their names, the summary, the writers, the previews
+and the space-time files of an isosurface series.
+
+- `output_names`: kind -> file name of a result's output set;
+- `summary`, `result_summary`, `input_summary`, `files_sha256`: the summary JSON;
+- `write_segmentation`: labels, curvature, summary and preview as one set;
+- `volseg.outputs.preview`: the preview and persistence-curve PNGs;
+- `volseg.outputs.spacetime`: the mesh, ParaView series and summary of a series.
+"""
+
+from ._summary import (
+    BLOCKWISE_NIFTI_VOXELS,
+    BLOCKWISE_SUFFIXES,
+    LISTED_PERSISTENCES,
+    OUTPUT_SUFFIXES,
+    files_sha256,
+    input_summary,
+    output_names,
+    result_summary,
+    result_title,
+    summary,
+)
+from ._write import write_result_files, write_segmentation
+
+__all__ = ["OUTPUT_SUFFIXES", "BLOCKWISE_SUFFIXES", "BLOCKWISE_NIFTI_VOXELS",
+           "LISTED_PERSISTENCES", "output_names", "files_sha256", "summary", "result_summary",
+           "input_summary", "result_title", "write_result_files", "write_segmentation"]

@@ -1,0 +1,70 @@
+"""One writer for a volume's output set, whatever its labels are: numpy arrays in
+memory, or lazy arrays the blockwise path has already stored."""
+
+from __future__ import annotations
+
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+from .. import _json
+from ..io import Frame, OutputSet, write_volume, write_zarr
+
+__all__ = ["write_result_files", "write_segmentation"]
+
+#: The array outputs: kind -> the paths' keys that hold it (a set has one or both).
+_ARRAY_KEYS = {"labels": ("labels", "labels_nifti"), "curvature": ("curvature", "curvature_nifti")}
+
+
+def write_result_files(paths: dict, result, values, info: dict, *, frame: Frame | None,
+                       title: str, value_range=None) -> None:
+    """Write `result`'s files into `paths` (an output set's staging paths): labels and
+    curvature (NIfTI, or Zarr for ``.zarr`` paths; a path already written by the
+    blockwise path's storage is kept), preview, persistence plot, summary `info`.
+
+    `values` is the volume that was segmented (for the preview) and `value_range` its
+    (min, max), when known. Labels are written in the smallest unsigned type that
+    holds them (what label viewers expect), the curvature as float32 in NIfTI.
+    """
+    from .preview import write_persistence_plot, write_preview
+
+    frame = frame or Frame.from_spacing(result.spacing)
+    k = int(result.n_regions)
+    label_type = np.min_scalar_type(max(k, 0))
+    arrays = {"labels": lambda: result.labels.astype(label_type),
+              "curvature": lambda: result.curvature.astype(np.float32)}
+    hierarchy = result.hierarchy
+    curve = (hierarchy.event_persistence, hierarchy.n_components, result.min_persistence)
+    # The writers run at once (zlib releases the GIL).
+    with ThreadPoolExecutor(3) as pool:
+        jobs = [pool.submit(_write_array, Path(paths[key]), arrays[kind], frame)
+                for kind, keys in _ARRAY_KEYS.items() for key in keys
+                if key in paths and not Path(paths[key]).exists()]
+        jobs.append(pool.submit(write_preview, paths["preview"], values, result.curvature,
+                                result.labels, title=title, persistence=curve,
+                                value_range=value_range, n_labels=k))
+        if "persistence" in paths:
+            jobs.append(pool.submit(write_persistence_plot, paths["persistence"], *curve, k))
+        for job in jobs:
+            job.result()
+    Path(paths["summary"]).write_text(_json.dumps(info, indent=2))
+
+
+def _write_array(path: Path, make, frame):
+    array = make()
+    if path.name.endswith(".zarr"):
+        write_zarr(path, array, frame=frame)
+    else:
+        write_volume(path, np.asarray(array), frame=frame)
+
+
+def write_segmentation(outputs: OutputSet, result, values, info: dict, *, frame: Frame | None,
+                       title: str) -> dict:
+    """Write labels, curvature, summary and preview of `result` as one set (an entered
+    `OutputSet`); `info` is the summary (its ``outputs`` entry is filled in here).
+    Returns the summary."""
+    info = {**info, "outputs": {kind: str(path) for kind, path in outputs.targets.items()}}
+    outputs.commit(lambda paths: write_result_files(paths, result, values, info, frame=frame,
+                                                    title=title))
+    return info
