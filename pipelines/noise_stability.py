@@ -244,8 +244,6 @@ def run(datasets, out_dir, *, operators=DEFAULT_OPERATORS, levels=DEFAULT_LEVELS
     """
     if cut not in CUTS:
         raise UsageError(f"cut must be one of {CUTS}, got {cut!r}")
-    from dask.distributed import as_completed
-
     from volseg.io import FolderLock, OutputError
 
     out_dir = Path(out_dir)
@@ -271,48 +269,56 @@ def run(datasets, out_dir, *, operators=DEFAULT_OPERATORS, levels=DEFAULT_LEVELS
         start = time.perf_counter()
         progress = _Progress(len(pending), say)
         engine = _engine(scheduler, workers)
-        client = engine.client
         try:
-            needed = {t["dataset"] for t in pending}
-            scattered = {name: client.scatter(volume, hash=False)
-                         for name, volume, _ in datasets if name in needed}
-            references = {}
-            for t in pending:
-                pair = (t["dataset"], t["operator"])
-                if pair not in references:
-                    references[pair] = client.submit(clean_reference_safely, scattered[pair[0]],
-                                                     pair[1], regions, mask, pure=False)
-            futures = {}
-            run_token = uuid.uuid4().hex[:8]  # two runs on one scheduler never share keys
-            for t in pending:
-                name = (f"noise-{t['dataset']}-{t['operator']}-{t['level']}-{t['seed']}-"
-                        f"{run_token}")
-                future = client.submit(run_task_safely, t, scattered[t["dataset"]],
-                                       references[(t["dataset"], t["operator"])], key=name)
-                futures[future] = t
-            errors = {}
-            for future in as_completed(futures):
-                task = futures.pop(future)
-                try:
-                    row = future.result()
-                except Exception as err:  # noqa: BLE001 - the worker died, or the like
-                    row = _failure(err)
-                if "error" in row:  # recorded with its error; the others go on
-                    store.record(task, status="failed", error=row["error"])
-                    errors[row["error"]] = errors.get(row["error"], 0) + 1
-                    counts["failed"] += 1
-                    progress.tick(failed=True)
-                else:
-                    store.record(row)
-                    counts["ran"] += 1
-                    progress.tick()
-                future.release()
+            errors = _submit_and_record(engine.client, pending, datasets, regions, mask, store,
+                                        counts, progress)
         finally:
             engine.__exit__(None, None, None)
         for error, n in errors.items():
             say(f"{n} task{'s' if n > 1 else ''} failed with {error}")
         counts["seconds"] = time.perf_counter() - start
         return counts
+
+
+def _submit_and_record(client, pending, datasets, regions, mask, store, counts, progress):
+    """Submit every pending task (after one clean reference per dataset and operator)
+    and record each as it finishes; returns {error: count} of the failed ones."""
+    from dask.distributed import as_completed
+
+    needed = {t["dataset"] for t in pending}
+    scattered = {name: client.scatter(volume, hash=False)
+                 for name, volume, _ in datasets if name in needed}
+    references = {}
+    for t in pending:
+        pair = (t["dataset"], t["operator"])
+        if pair not in references:
+            references[pair] = client.submit(clean_reference_safely, scattered[pair[0]],
+                                             pair[1], regions, mask, pure=False)
+    futures = {}
+    run_token = uuid.uuid4().hex[:8]  # two runs on one scheduler never share keys
+    for t in pending:
+        name = f"noise-{t['dataset']}-{t['operator']}-{t['level']}-{t['seed']}-{run_token}"
+        future = client.submit(run_task_safely, t, scattered[t["dataset"]],
+                               references[(t["dataset"], t["operator"])], key=name)
+        futures[future] = t
+    errors = {}
+    for future in as_completed(futures):
+        task = futures.pop(future)
+        try:
+            row = future.result()
+        except Exception as err:  # noqa: BLE001 - the worker died, or the like
+            row = _failure(err)
+        if "error" in row:  # recorded with its error; the others go on
+            store.record(task, status="failed", error=row["error"])
+            errors[row["error"]] = errors.get(row["error"], 0) + 1
+            counts["failed"] += 1
+            progress.tick(failed=True)
+        else:
+            store.record(row)
+            counts["ran"] += 1
+            progress.tick()
+        future.release()
+    return errors
 
 
 # ---------------------------------------------------------------- the report

@@ -14,6 +14,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 __all__ = [
+    "row_keys",
     "Faces",
     "check_mesh",
     "faces",
@@ -117,7 +118,7 @@ class Faces:
         return self.simplices[:, 1] >= 0
 
 
-def _row_keys(rows: NDArray[np.intp], base: int) -> NDArray:
+def row_keys(rows: NDArray[np.intp], base: int) -> NDArray:
     """One sortable key per row of small non-negative ints (rows of equal keys are equal)."""
     width = rows.shape[1]
     if width == 0:
@@ -180,7 +181,7 @@ def faces(simplices: ArrayLike, n_vertices: int | None = None) -> Faces:
     sign = _permutation_parity(listed) ^ (local % 2).astype(np.int8)
     facet = np.sort(listed, axis=1)
     del listed
-    key = _row_keys(facet, max(n_vertices, 1))
+    key = row_keys(facet, max(n_vertices, 1))
     order = np.argsort(key)
     key_sorted = key[order]
     starts = np.flatnonzero(np.r_[True, key_sorted[1:] != key_sorted[:-1]])
@@ -458,7 +459,7 @@ def unique_rows(rows: NDArray[np.intp]) -> NDArray[np.intp]:
     (as ``np.unique(rows, axis=0)``, 3-5x faster: one int64 key per row)."""
     if not len(rows):
         return rows
-    keys = _row_keys(rows, int(rows.max()) + 1)
+    keys = row_keys(rows, int(rows.max()) + 1)
     return rows[np.unique(keys, return_index=True)[1]]
 
 

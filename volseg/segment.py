@@ -294,17 +294,6 @@ def _cut_request(min_persistence, n_regions) -> tuple:
     return min_persistence, n_regions, auto
 
 
-def _renamed(new_value, old_value, new: str, old: str, default):
-    """The value of a renamed keyword: the new one, or the old one with a
-    DeprecationWarning (both given: an error)."""
-    if old_value is None:
-        return new_value
-    if new_value != default:
-        raise ValueError(f"give `{new}`, not both `{new}` and its old name `{old}`")
-    warnings.warn(f"`{old}` is deprecated: use `{new}`", DeprecationWarning, stacklevel=3)
-    return old_value
-
-
 def segment_volume(
     volume,
     *,
@@ -359,8 +348,8 @@ def segment_volume(
     -------
     Segmentation
     """
-    smooth_sigma = _renamed(smooth_sigma, smooth, "smooth_sigma", "smooth", 0.0)
-    padding = _renamed(padding, boundary, "padding", "boundary", "linear")
+    smooth_sigma = _validate.renamed(smooth_sigma, smooth, "smooth_sigma", "smooth", 0.0)
+    padding = _validate.renamed(padding, boundary, "padding", "boundary", "linear")
     data = getattr(volume, "data", volume)
     lazy = _validate.is_lazy(data)
     data = _validate.lazy_volume_array(data) if lazy else _validate.volume_array(volume)
@@ -427,7 +416,7 @@ def segment_mesh(
     from . import mesh as _mesh
     from .curvature import vertex_curvature
 
-    smooth_rounds = _renamed(smooth_rounds, smooth, "smooth_rounds", "smooth", 0)
+    smooth_rounds = _validate.renamed(smooth_rounds, smooth, "smooth_rounds", "smooth", 0)
     entry = get_operator(operator)
     if boundary not in ("partial", "nan"):
         raise ValueError(f"unknown `boundary` {boundary!r}; choose 'partial' or 'nan'")

@@ -164,9 +164,8 @@ def segment_series(
         does not cross, bad spacing or time scale, and what `segment_mesh` refuses.
     """
     from . import _validate
-    from .segment import _renamed
 
-    smooth_rounds = _renamed(smooth_rounds, smooth, "smooth_rounds", "smooth", 0)
+    smooth_rounds = _validate.renamed(smooth_rounds, smooth, "smooth_rounds", "smooth", 0)
     data = _validate.volume_array(field, "field", ndim=4)
     spacing = _validate.spacing(spacing)
     time_scale = _validate.number(time_scale, "time_scale", positive=True)

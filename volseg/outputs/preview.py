@@ -114,26 +114,50 @@ def persistence_panel(persistence, n_components, threshold, n_regions, *, width=
     def y_of(r):
         return height - bottom - np.log10(r) / max(np.log10(y_hi), 1e-9) * (height - top - bottom)
 
-    draw.rectangle([left, top, width - right, height - bottom], outline=_INK)
+    box = (left, top, width - right, height - bottom)
+    _curve_axes(draw, box, (x_lo, x_hi, y_hi), x_of, y_of, small, width)
+    xs, ys = _curve_corners(p[::-1], x_of, y_of, (x_lo, x_hi, y_hi), n_components)
+    draw.line(list(zip(xs.tolist(), ys.tolist(), strict=True)), fill=(31, 119, 180), width=2)
+    if threshold > 0 and x_lo < threshold < x_hi:
+        x = x_of(threshold)
+        draw.line([x, top, x, height - bottom], fill=(214, 39, 40), width=1)
+        right_side = x < width * 0.7
+        draw.text((x + 4 if right_side else x - 4, top + 2),
+                  f"cut: {n_regions} regions at {threshold:.3g}", fill=(214, 39, 40), font=small,
+                  anchor="la" if right_side else "ra")
+    return np.asarray(canvas)
+
+
+def _curve_axes(draw, box, limits, x_of, y_of, font, width):
+    """The frame, the log ticks and the axis names of the persistence curve."""
+    left, top, right, bottom = box
+    x_lo, x_hi, y_hi = limits
+    draw.rectangle(list(box), outline=_INK)
     for t in _log_ticks(x_lo, x_hi):
         if x_lo <= t <= x_hi:
             x = x_of(t)
-            draw.line([x, height - bottom, x, height - bottom + 4], fill=_INK)
-            draw.text((x, height - bottom + 6), f"{t:g}", fill=_INK, font=small, anchor="ma")
+            draw.line([x, bottom, x, bottom + 4], fill=_INK)
+            draw.text((x, bottom + 6), f"{t:g}", fill=_INK, font=font, anchor="ma")
     for r in [1, 10, 100, 1000, 10000, 100000, 1000000]:
         if r <= y_hi:
             y = y_of(r)
             draw.line([left - 4, y, left, y], fill=_INK)
-            draw.text((left - 6, y), str(r), fill=_INK, font=small, anchor="rm")
-    draw.text((width // 2, height - 14), "persistence threshold (log)", fill=_INK, font=small,
+            draw.text((left - 6, y), str(r), fill=_INK, font=font, anchor="rm")
+    draw.text((width // 2, bottom + 26), "persistence threshold (log)", fill=_INK, font=font,
               anchor="ma")
-    draw.text((6, top - 12), "regions (log)", fill=_INK, font=small)
-    # Regions at threshold t: n_components + #{p >= t}, a staircase falling at each p,
-    # drawn through its corners; a corner in the same tenth of a pixel as the one
-    # before it is dropped: millions of events (8 M maxima at 512^3) draw the same few
-    # thousand pixels. A block of events at a time, so that the corners of all the
-    # events are never in memory at once (they were the preview's peak at 512^3).
-    ascending = p[::-1]
+    draw.text((6, top - 12), "regions (log)", fill=_INK, font=font)
+
+
+def _curve_corners(ascending, x_of, y_of, limits, n_components) -> tuple:
+    """(xs, ys) pixel corners of the persistence staircase.
+
+    Regions at threshold t: n_components + #{p >= t}, a staircase falling at each p,
+    drawn through its corners; a corner in the same tenth of a pixel as the one
+    before it is dropped: millions of events (8 M maxima at 512^3) draw the same few
+    thousand pixels. A block of events at a time, so that the corners of all the
+    events are never in memory at once (they were the preview's peak at 512^3).
+    """
+    x_lo, x_hi, y_hi = limits
     start = (x_of(x_lo), y_of(y_hi))
     xs, ys = [np.array([start[0]])], [np.array([start[1]])]
     previous = np.round(np.array(start) * 10)
@@ -151,16 +175,7 @@ def persistence_panel(persistence, n_components, threshold, n_regions, *, width=
         ys.append(by[keep])
     xs.append(np.array([x_of(x_hi)]))            # the last corner is always drawn
     ys.append(np.array([y_of(max(n_components, 1))]))
-    xs, ys = np.concatenate(xs), np.concatenate(ys)
-    draw.line(list(zip(xs.tolist(), ys.tolist(), strict=True)), fill=(31, 119, 180), width=2)
-    if threshold > 0 and x_lo < threshold < x_hi:
-        x = x_of(threshold)
-        draw.line([x, top, x, height - bottom], fill=(214, 39, 40), width=1)
-        right_side = x < width * 0.7
-        draw.text((x + 4 if right_side else x - 4, top + 2),
-                  f"cut: {n_regions} regions at {threshold:.3g}", fill=(214, 39, 40), font=small,
-                  anchor="la" if right_side else "ra")
-    return np.asarray(canvas)
+    return np.concatenate(xs), np.concatenate(ys)
 
 
 def write_persistence_plot(path, persistence, n_components, threshold, n_regions) -> Path:
@@ -220,38 +235,16 @@ def write_preview(path, volume, curvature, labels, *, title="", persistence=None
     """
     from PIL import Image, ImageDraw
 
-    shape = tuple(volume.shape)
-    indices = []
-    for row in range(3):
-        index = [slice(None)] * 3
-        index[row] = shape[row] // 2
-        indices.append(tuple(index))
-    # Only the three mid slices are read: a lazy (Dask, Zarr) volume is never loaded whole.
-    sliced = [[np.asarray(a[index]) for index in indices] for a in (volume, curvature, labels)]
-    from .._validate import is_lazy
-
-    lazy = is_lazy(volume)
-    if not lazy:
-        volume, labels = np.asarray(volume), np.asarray(labels)
-    wanted = ([] if value_range is not None else [volume.min(), volume.max()]) + (
-        [] if n_labels is not None else [labels.max() if labels.size else 0])
-    if lazy:         # one pass over the volume and the labels for what is not given
-        import dask
-
-        wanted = dask.compute(*wanted)
-    found = [float(v) for v in wanted]
-    lo, hi = (float(v) for v in (value_range if value_range is not None else found[:2]))
-    k = int(n_labels if n_labels is not None else found[-1])
+    indices, sliced = _mid_slices(volume, curvature, labels)
+    lo, hi, k = _range_and_count(volume, labels, value_range, n_labels)
     mids = sliced[1]
     limit = float(np.percentile(np.abs(np.concatenate([m.ravel() for m in mids])), 99)) or 1.0
-
     rows = []
     for row, axis in enumerate("xyz"):
-        index = indices[row]
         vol, cur, lab = sliced[0][row].T, sliced[1][row].T, sliced[2][row].T
         panels = [("volume", gray(vol, lo, hi)), ("curvature", diverging(cur, limit)),
                   ("regions", overlay(vol, lab, lo, hi))]
-        rows.append((axis, index[row], [(name, _fit(rgb)) for name, rgb in panels]))
+        rows.append((axis, indices[row][row], [(name, _fit(rgb)) for name, rgb in panels]))
     heights = [max(image.shape[0] for _, image in panels) for _, _, panels in rows]
     width = _LEFT + 3 * _BOX + 2 * _GAP + 30
     height = _TOP + sum(heights) + 3 * _GAP + 62
@@ -261,8 +254,60 @@ def write_preview(path, volume, curvature, labels, *, title="", persistence=None
         height += curve.shape[0] + 12
     canvas = Image.new("RGB", (width, height), _BACKGROUND)
     draw = ImageDraw.Draw(canvas)
-    small, medium, large = _font(11), _font(13), _font(17)
+    small, large = _font(11), _font(17)
     draw.text((width // 2, 14), title, fill=_INK, font=large, anchor="ma")
+    bar_y = _draw_rows(canvas, draw, rows, heights, k) - 8
+    ramp = np.linspace(0, 1, _BOX)
+    _colour_bar(canvas, draw, _LEFT, bar_y, _BOX, gray(ramp, 0, 1),
+                [(0, f"{lo:.4g}"), (1, f"{hi:.4g}")], "value", small)
+    _colour_bar(canvas, draw, _LEFT + _BOX + _GAP, bar_y, _BOX,
+                diverging(np.linspace(-limit, limit, _BOX), limit),
+                [(0, f"{-limit:.3g}"), (0.5, "0"), (1, f"{limit:.3g}")],
+                "mean curvature (+ peak, - valley)", small)
+    if curve is not None:
+        canvas.paste(Image.fromarray(curve), (_LEFT, bar_y + 62))
+    canvas.save(path, format="PNG")
+    return Path(path)
+
+
+def _mid_slices(volume, curvature, labels) -> tuple:
+    """The three mid-slice indices and, for each of volume, curvature and labels, its
+    three mid slices: only they are read (a lazy volume is never loaded whole)."""
+    shape = tuple(volume.shape)
+    indices = []
+    for row in range(3):
+        index = [slice(None)] * 3
+        index[row] = shape[row] // 2
+        indices.append(tuple(index))
+    return indices, [[np.asarray(a[index]) for index in indices]
+                     for a in (volume, curvature, labels)]
+
+
+def _range_and_count(volume, labels, value_range, n_labels) -> tuple:
+    """(lo, hi, k): the volume's range and the largest label, as given, else computed
+    (in one pass over a lazy volume and labels)."""
+    from .._validate import is_lazy
+
+    lazy = is_lazy(volume)
+    if not lazy:
+        volume, labels = np.asarray(volume), np.asarray(labels)
+    wanted = ([] if value_range is not None else [volume.min(), volume.max()]) + (
+        [] if n_labels is not None else [labels.max() if labels.size else 0])
+    if lazy:
+        import dask
+
+        wanted = dask.compute(*wanted)
+    found = [float(v) for v in wanted]
+    lo, hi = (float(v) for v in (value_range if value_range is not None else found[:2]))
+    return lo, hi, int(n_labels if n_labels is not None else found[-1])
+
+
+def _draw_rows(canvas, draw, rows, heights, k) -> int:
+    """Paste the panels row by row, with their names, axes and the legend; returns the
+    y below the last row."""
+    from PIL import Image
+
+    small, medium = _font(11), _font(13)
     y0 = _TOP
     for row, (axis, position, panels) in enumerate(rows):
         other = [c for c in "xyz" if c != axis]
@@ -276,26 +321,20 @@ def write_preview(path, volume, curvature, labels, *, title="", persistence=None
             draw.text((x0 + w // 2, y0 + h + 3), other[0], fill=_INK, font=small, anchor="ma")
             draw.text((x0 - 4, y0 + h // 2), other[1], fill=_INK, font=small, anchor="rm")
         if row == 0 and k:
-            shown = min(k, 10)
-            x0 = _LEFT + 2 * (_BOX + _GAP) + _BOX - 112
-            draw.rectangle([x0 - 6, y0 + 4, x0 + 108, y0 + 28 + 14 * shown],
-                           fill=(255, 255, 255), outline=_INK)
-            draw.text((x0, y0 + 8), f"{k} regions" + (" (first 10)" if k > 10 else ""),
-                      fill=_INK, font=small)
-            for i in range(shown):
-                yy = y0 + 24 + 14 * i
-                draw.rectangle([x0, yy, x0 + 12, yy + 10], fill=tuple(int(c) for c in TAB20[i]))
-                draw.text((x0 + 18, yy - 1), f"region {i + 1}", fill=_INK, font=small)
+            _legend(draw, y0, k, small)
         y0 += heights[row] + _GAP
-    bar_y = y0 - 8
-    ramp = np.linspace(0, 1, _BOX)
-    _colour_bar(canvas, draw, _LEFT, bar_y, _BOX, gray(ramp, 0, 1),
-                [(0, f"{lo:.4g}"), (1, f"{hi:.4g}")], "value", small)
-    _colour_bar(canvas, draw, _LEFT + _BOX + _GAP, bar_y, _BOX,
-                diverging(np.linspace(-limit, limit, _BOX), limit),
-                [(0, f"{-limit:.3g}"), (0.5, "0"), (1, f"{limit:.3g}")],
-                "mean curvature (+ peak, - valley)", small)
-    if curve is not None:
-        canvas.paste(Image.fromarray(curve), (_LEFT, bar_y + 62))
-    canvas.save(path, format="PNG")
-    return Path(path)
+    return y0
+
+
+def _legend(draw, y0, k, font):
+    """The first ten regions' colours, top right of the first row."""
+    shown = min(k, 10)
+    x0 = _LEFT + 2 * (_BOX + _GAP) + _BOX - 112
+    draw.rectangle([x0 - 6, y0 + 4, x0 + 108, y0 + 28 + 14 * shown],
+                   fill=(255, 255, 255), outline=_INK)
+    draw.text((x0, y0 + 8), f"{k} regions" + (" (first 10)" if k > 10 else ""),
+              fill=_INK, font=font)
+    for i in range(shown):
+        yy = y0 + 24 + 14 * i
+        draw.rectangle([x0, yy, x0 + 12, yy + 10], fill=tuple(int(c) for c in TAB20[i]))
+        draw.text((x0 + 18, yy - 1), f"region {i + 1}", fill=_INK, font=font)

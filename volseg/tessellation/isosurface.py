@@ -183,12 +183,12 @@ def _axis_vector(value, d: int, name: str, default: float, positive: bool) -> ND
 def _problem_vertices(simplices: NDArray, n_vertices: int) -> NDArray[np.intp]:
     """Vertices where a mesh is not an oriented manifold: on a face of three or more
     simplices, of a duplicated simplex, of an inconsistently oriented face, or pinched."""
-    from ..mesh import _row_keys, faces, pinched_vertices
+    from ..mesh import faces, pinched_vertices, row_keys
 
     width = simplices.shape[1]
     facets = np.sort(np.concatenate([np.delete(simplices, c, axis=1) for c in range(width)]),
                      axis=1)
-    _, inverse, counts = np.unique(_row_keys(facets, max(n_vertices, 1)), return_inverse=True,
+    _, inverse, counts = np.unique(row_keys(facets, max(n_vertices, 1)), return_inverse=True,
                                    return_counts=True)
     crowded = facets[counts[inverse] > 2]
     if len(crowded):

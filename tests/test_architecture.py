@@ -1,0 +1,184 @@
+"""The house rules, read from the code: imports go one way (no cycles, function-level
+imports included), no package takes another's private names, the Morse package
+stands alone, and no function outside generated code runs past 60 lines."""
+
+import ast
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGE = ROOT / "volseg"
+#: Generated code (the curvature stencils, written by `_stencil_codegen`).
+GENERATED = {"volseg.curvature._grid_stencil"}
+#: Deprecated aliases of moved modules (they only re-export).
+SHIMS = {"volseg.preview", "volseg.engine", "volseg.spacetime_outputs"}
+MAX_FUNCTION_LINES = 60
+
+
+def _module_name(path: Path) -> str:
+    parts = path.relative_to(ROOT).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _modules() -> dict:
+    return {_module_name(p): p for p in PACKAGE.rglob("*.py")}
+
+
+MODULES = _modules()
+
+
+def _resolve(module: str, path: Path, node: ast.ImportFrom) -> str:
+    if not node.level:
+        return node.module or ""
+    package = module if path.name == "__init__.py" else module.rsplit(".", 1)[0]
+    for _ in range(node.level - 1):
+        package = package.rsplit(".", 1)[0]
+    return f"{package}.{node.module}" if node.module else package
+
+
+def _imports(module: str):
+    """(imported module, imported name or None, line) for every volseg import of
+    `module`, at any depth (function-level imports included)."""
+    path = MODULES[module]
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            for alias in node.names:
+                if alias.name.startswith("volseg"):
+                    yield alias.name, None, node.lineno
+        elif isinstance(node, ast.ImportFrom):
+            target = _resolve(module, path, node)
+            if not target.startswith("volseg"):
+                continue
+            for alias in node.names:
+                submodule = f"{target}.{alias.name}"
+                if submodule in MODULES:
+                    yield submodule, None, node.lineno
+                else:
+                    yield target, alias.name, node.lineno
+
+
+def _package_of(module: str) -> str:
+    """The unit that owns a module: volseg's subpackage, or the top-level module."""
+    parts = module.split(".")
+    if len(parts) >= 2 and f"volseg.{parts[1]}" in MODULES and \
+            MODULES[f"volseg.{parts[1]}"].name == "__init__.py":
+        return f"volseg.{parts[1]}"
+    return module
+
+
+def _is_leaf(module: str) -> bool:
+    """A shared leaf: a private top-level module that imports nothing of volseg but
+    other leaves (checked by `test_leaves_import_only_leaves`)."""
+    name = module.split(".")
+    return (len(name) == 2 and name[1].startswith("_") and not name[1].startswith("__")
+            and _package_of(module) == module)
+
+
+def _graph() -> dict:
+    graph = {}
+    for module in MODULES:
+        if module in SHIMS:
+            continue
+        graph[module] = set()
+        for target, _, _ in _imports(module):
+            if target in MODULES and target != module and target != "volseg":
+                graph[module].add(target)
+    return graph
+
+
+def test_imports_have_no_cycle():
+    graph = _graph()
+    state, path = {}, []
+
+    def visit(module):
+        state[module] = "open"
+        path.append(module)
+        for target in sorted(graph.get(module, ())):
+            if state.get(target) == "open":
+                cycle = path[path.index(target):] + [target]
+                pytest.fail("import cycle: " + " -> ".join(cycle))
+            if target not in state:
+                visit(target)
+        path.pop()
+        state[module] = "done"
+
+    for module in sorted(graph):
+        if module not in state:
+            visit(module)
+
+
+def test_no_private_name_is_imported_across_packages():
+    offences = []
+    for module in MODULES:
+        if module in SHIMS:
+            continue
+        own = _package_of(module)
+        for target, name, line in _imports(module):
+            if target not in MODULES or _package_of(target) == own or _is_leaf(target):
+                continue
+            private_module = any(part.startswith("_") and not part.startswith("__")
+                                 for part in target.split(".")[1:])
+            private_name = name is not None and name.startswith("_") and not name.startswith("__")
+            if private_module or private_name:
+                offences.append(f"{module}:{line} imports {target}"
+                                + (f".{name}" if name else ""))
+    assert not offences, "\n".join(offences)
+
+
+def test_leaves_import_only_leaves():
+    for module in MODULES:
+        if _is_leaf(module):
+            for target, _, line in _imports(module):
+                assert target == "volseg" or _is_leaf(target), f"{module}:{line} imports {target}"
+
+
+def test_morse_stands_alone():
+    """The Morse package imports nothing of volseg outside itself and the leaves, so
+    it can be lifted out with them."""
+    for module in MODULES:
+        if _package_of(module) != "volseg.morse":
+            continue
+        for target, _, line in _imports(module):
+            assert _package_of(target) == "volseg.morse" or _is_leaf(target), \
+                f"{module}:{line} imports {target}"
+
+
+def _code_lines(lines, node) -> int:
+    body = node.body
+    doc = None
+    if body and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant) \
+            and isinstance(body[0].value.value, str):
+        doc = range(body[0].lineno, body[0].end_lineno + 1)
+    return sum(1 for n in range(node.lineno, node.end_lineno + 1)
+               if lines[n - 1].strip() and not lines[n - 1].strip().startswith("#")
+               and (doc is None or n not in doc))
+
+
+@pytest.mark.parametrize("root", ["volseg", "pipelines", "data_fetch"])
+def test_no_function_is_over_60_code_lines(root):
+    long = []
+    for path in sorted((ROOT / root).rglob("*.py")):
+        if _module_name(path) in GENERATED:
+            continue
+        source = path.read_text()
+        lines = source.splitlines()
+        for node in ast.walk(ast.parse(source)):
+            if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
+                count = _code_lines(lines, node)
+                if count > MAX_FUNCTION_LINES:
+                    long.append(f"{path.relative_to(ROOT)}:{node.lineno} {node.name}: {count}")
+    assert not long, "\n".join(long)
+
+
+def test_the_rules_see_a_cycle_and_a_private_import(tmp_path):
+    """The checks above can fail: a planted cycle and a planted private import are
+    found by the same functions."""
+    a = ast.parse("from .b import x\n")
+    assert _resolve("volseg.a", PACKAGE / "a.py", a.body[0]) == "volseg.b"
+    nested = ast.parse("from ..morse import _edges\n")
+    assert _resolve("volseg.blockwise._pipeline", PACKAGE / "blockwise" / "_pipeline.py",
+                    nested.body[0]) == "volseg.morse"
+    assert _package_of("volseg.morse._edges") == "volseg.morse"
+    assert _is_leaf("volseg._kuhn") and not _is_leaf("volseg.morse._kernels")
+    assert not _is_leaf("volseg.segment")
