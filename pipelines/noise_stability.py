@@ -35,8 +35,8 @@ from pathlib import Path
 
 import numpy as np
 
-from volseg.errors import UsageError
 from volseg.curvature import REGISTRY, cli_choices, normalize_operator
+from volseg.errors import UsageError
 from volseg.segment import DEFAULT_REGIONS
 
 from ._output import save_figure, write_csv

@@ -511,9 +511,6 @@ def laplace_beltrami_slab(fpf, shape, i, h, acc):
     o5 = 1 * sx + 0 * sy + 1
     o6 = 1 * sx + 1 * sy + 0
     o7 = 1 * sx + 1 * sy + 1
-    o8 = -1 * sx + 0 * sy + 0
-    o9 = 0 * sx + -1 * sy + 0
-    o10 = 0 * sx + 0 * sy + -1
     hinvx, hinvy, hinvz = 1.0 / h[0], 1.0 / h[1], 1.0 / h[2]
     v0 = h[0] * h[1] * h[2] / 6.0
     for j in range(shape[1] - 1):
@@ -527,9 +524,6 @@ def laplace_beltrami_slab(fpf, shape, i, h, acc):
             f5 = fpf[base + o5]
             f6 = fpf[base + o6]
             f7 = fpf[base + o7]
-            f8 = fpf[base + o8] if i > 0 else f0
-            f9 = fpf[base + o9] if j > 0 else f0
-            f10 = fpf[base + o10] if k > 0 else f0
             g0x = (f4 - f0) * hinvx
             g0y = (f6 - f4) * hinvy
             g0z = (f7 - f6) * hinvz
@@ -548,24 +542,6 @@ def laplace_beltrami_slab(fpf, shape, i, h, acc):
             g5z = (f1 - f0) * hinvz
             g5y = (f3 - f1) * hinvy
             g5x = (f7 - f3) * hinvx
-            g6z = (f0 - f10) * hinvz
-            g6x = (f4 - f0) * hinvx
-            g6y = (f6 - f4) * hinvy
-            g7y = (f0 - f9) * hinvy
-            g7x = (f4 - f0) * hinvx
-            g7z = (f5 - f4) * hinvz
-            g8z = (f0 - f10) * hinvz
-            g8y = (f2 - f0) * hinvy
-            g8x = (f6 - f2) * hinvx
-            g9x = (f0 - f8) * hinvx
-            g9y = (f2 - f0) * hinvy
-            g9z = (f3 - f2) * hinvz
-            g10y = (f0 - f9) * hinvy
-            g10z = (f1 - f0) * hinvz
-            g10x = (f5 - f1) * hinvx
-            g11x = (f0 - f8) * hinvx
-            g11z = (f1 - f0) * hinvz
-            g11y = (f3 - f1) * hinvy
             ww = 1.0 + g0x * g0x + g0y * g0y + g0z * g0z
             vol0 = v0 * math.sqrt(ww)
             gb = (g0x * -hinvx) / ww

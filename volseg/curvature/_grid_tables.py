@@ -22,7 +22,7 @@ def _tables():
     index = {tuple(o): n for n, o in enumerate(offsets)}
     paths = [list(map(tuple, path)) for path in _kuhn.cube_paths(3)]
     axes = [list(order) for order in _kuhn.axis_orders(3)]
-    for path, (a, b, c) in zip(_kuhn.cube_paths(3), _kuhn.axis_orders(3)):
+    for path, (a, b, c) in zip(_kuhn.cube_paths(3), _kuhn.axis_orders(3), strict=True):
         # The tetrahedron (c, a, b) of the cube below along c shares the face
         # {0, e_a, e_a + e_b} with this cube's tetrahedron (a, b, c).
         paths.append([tuple(-unit[c]), *map(tuple, path[:3])])

@@ -40,7 +40,7 @@ def _load(lines, indent):
     pad = " " * indent
     for c in range(8):
         lines.append(f"{pad}f{c} = fpf[base + o{c}]")
-    for c, axis in zip(range(8, 11), "ijk"):
+    for c, axis in zip(range(8, 11), "ijk", strict=True):
         lines.append(f"{pad}f{c} = fpf[base + o{c}] if {axis} > 0 else f0")
     for t in range(12):
         for s in range(3):
@@ -180,9 +180,27 @@ def _laplace_beltrami():
     return lines
 
 
+def _drop_unused(lines):
+    """A kernel's lines without the loads, offsets and gradient components it never
+    reads (`_load` and `_offsets` write all of them; each kernel uses its own subset):
+    what the compiler drops anyway, so the generated file lints clean."""
+    import re
+
+    assign = re.compile(r"^\s*(g\d+[xyz]|f\d+|o\d+) = ")
+    while True:     # until no dropped line was the last reader of another
+        text = "\n".join(lines)
+        kept = [line for line in lines if not (
+            (match := assign.match(line))
+            and len(re.findall(rf"\b{match.group(1)}\b", text)) == 1)]
+        if len(kept) == len(lines):
+            return kept
+        lines = kept
+
+
 def source() -> str:
-    return "\n".join([HEADER.rstrip("\n"), *_extrinsic(True), *_extrinsic(False),
-                      *_laplace_beltrami()]) + "\n"
+    return "\n".join([HEADER.rstrip("\n"), *_drop_unused(_extrinsic(True)),
+                      *_drop_unused(_extrinsic(False)),
+                      *_drop_unused(_laplace_beltrami())]) + "\n"
 
 
 if __name__ == "__main__":

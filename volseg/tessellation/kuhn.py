@@ -40,7 +40,7 @@ def kuhn_simplices(shape, *, periodic=(), upward: bool = True) -> NDArray[np.int
         np.meshgrid(*[np.arange(c) for c in cells_per_axis], indexing="ij"), axis=-1
     ).reshape(-1, d)
     out = []
-    for perm, path in zip(axis_orders(d), cube_paths(d)):
+    for perm, path in zip(axis_orders(d), cube_paths(d), strict=True):
         points = [corners + p for p in path]
         for a in periodic:
             for p in points:
