@@ -15,7 +15,7 @@ from pipelines import noise_stability as ns
 from pipelines.store import ResultStore
 from tests.conftest import smooth_random_field
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]   # the repository: pipelines/ runs from it
 
 
 def _volume(seed, n=24):
