@@ -177,7 +177,7 @@ def test_the_rules_see_a_cycle_and_a_private_import(tmp_path):
     a = ast.parse("from .b import x\n")
     assert _resolve("volseg.a", PACKAGE / "a.py", a.body[0]) == "volseg.b"
     nested = ast.parse("from ..morse import _edges\n")
-    assert _resolve("volseg.blockwise._pipeline", PACKAGE / "blockwise" / "_pipeline.py",
+    assert _resolve("volseg.blockwise._storage", PACKAGE / "blockwise" / "_storage.py",
                     nested.body[0]) == "volseg.morse"
     assert _package_of("volseg.morse._edges") == "volseg.morse"
     assert _is_leaf("volseg._kuhn") and not _is_leaf("volseg.morse._kernels")

@@ -105,9 +105,9 @@ def test_unwritable_output_folder(tmp_path, volvis_dir, capsys, monkeypatch):
     locked.mkdir()
     locked.chmod(stat.S_IRUSR | stat.S_IXUSR)
     if os.geteuid() == 0:  # root writes anywhere: make the permission check see the mode
-        import volseg.cli
+        import volseg.files
 
-        monkeypatch.setattr(volseg.cli.os, "access", lambda path, mode: False)
+        monkeypatch.setattr(volseg.files.os, "access", lambda path, mode: False)
     assert main(["segment", "nucleon", "-o", str(locked), "-q"]) == 2
     assert "not writable" in capsys.readouterr().err
 

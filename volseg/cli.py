@@ -6,7 +6,6 @@ Exit codes: 0 done, 2 bad input or usage (one line on stderr), 1 unexpected fail
 from __future__ import annotations
 
 import argparse
-import os
 import signal
 import sys
 from pathlib import Path
@@ -14,7 +13,6 @@ from pathlib import Path
 import numpy as np
 
 from . import _json
-from ._validate import is_lazy
 from ._version import __version__
 from .blockwise.engine import MEMORY_SHARE
 from .curvature import cli_choices, normalize_operator
@@ -186,15 +184,6 @@ def _progress(quiet):
     return say
 
 
-def _check_out_dir(out_dir: Path):
-    try:
-        out_dir.mkdir(parents=True, exist_ok=True)
-    except OSError as err:
-        raise UsageError(f"{out_dir}: cannot create the output folder ({err.strerror})") from None
-    if not os.access(out_dir, os.W_OK):
-        raise UsageError(f"{out_dir}: the output folder is not writable")
-
-
 def _check_mask_rule(rule):
     from .masks import check_rule
 
@@ -233,9 +222,6 @@ def _cmd_segment(args):
                                chunks=args.chunks, say=say) for name in args.inputs]
     if args.chunks is not None:
         volumes = [chunked(v, args.chunks) for v in volumes]
-    if args.noise and any(is_lazy(v.data) for v in volumes):
-        raise UsageError("--noise needs the volume in memory; drop --chunks")
-    _check_out_dir(out_dir)
     summaries = segment_files(
         volumes, out_dir, force=args.force, wait=args.wait,
         persistence_plot=args.plot_persistence, engine=engine, say=say,
@@ -270,7 +256,6 @@ def _cmd_isosurface(args):
     if not lo < args.level <= hi:
         raise UsageError(f"--level {args.level:g} is not crossed: the series ranges over "
                          f"[{lo:g}, {hi:g}]")
-    _check_out_dir(out_dir)
     summary = segment_series_files(
         series, args.level, out_dir, force=args.force, wait=args.wait, say=say,
         time_scale=args.time_scale, relax=args.relax, operator=normalize_operator(args.operator),
@@ -295,7 +280,6 @@ def _cmd_demo(args):
     from .io import Volume
 
     out_dir = Path(args.out_dir)
-    _check_out_dir(out_dir)
     if args.time:
         return _demo_time(args, out_dir)
     volume = Volume(demo_volume(), name="demo", source="built-in synthetic")

@@ -16,6 +16,7 @@ field or the argument.
 
 from __future__ import annotations
 
+import os
 import time
 from contextlib import ExitStack
 from pathlib import Path
@@ -29,7 +30,7 @@ from .outputs import files_sha256, output_names, result_title, summary, write_re
 from .segment import InMemory, SegmentRequest, run_stages
 
 __all__ = ["segment_files", "segment_to_files", "series_to_files", "segment_series_files",
-           "load_volume", "load_for_budget", "chunked", "output_sets"]
+           "load_volume", "load_for_budget", "chunked", "output_sets", "check_out_dir"]
 
 
 def _quiet(message):
@@ -89,8 +90,30 @@ def chunked(volume, size: int):
                   source=volume.source, path=volume.path, files=volume.files)
 
 
+def _tagged(say, tag: str):
+    return lambda message: say(tag + message)
+
+
 def _is_lazy(volume) -> bool:
     return _validate.is_lazy(volume.data)
+
+
+def check_out_dir(out_dir) -> Path:
+    """`out_dir`, created if needed; a UsageError when it cannot be created or written."""
+    out_dir = Path(out_dir)
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise UsageError(f"{out_dir}: cannot create the output folder ({err.strerror})") from None
+    if not os.access(out_dir, os.W_OK):
+        raise UsageError(f"{out_dir}: the output folder is not writable")
+    return out_dir
+
+
+def _refuse_noise_when_lazy(volumes, noise):
+    """What the blockwise path cannot do, refused before anything is written."""
+    if noise and any(_is_lazy(v) for v in volumes):
+        raise UsageError("--noise needs the volume in memory; drop --chunks")
 
 
 def output_sets(volumes, out_dir, *, force=False, wait=False, persistence_plot=False) -> list:
@@ -130,6 +153,8 @@ def segment_files(volumes, out_dir, *, force=False, wait=False, persistence_plot
     list of dict
         The summaries, in input order.
     """
+    _refuse_noise_when_lazy(volumes, options.get("noise"))
+    out_dir = check_out_dir(out_dir)
     sets = output_sets(volumes, out_dir, force=force, wait=wait,
                        persistence_plot=persistence_plot)
     summaries = []
@@ -144,8 +169,7 @@ def segment_files(volumes, out_dir, *, force=False, wait=False, persistence_plot
             stack.enter_context(engine)
             say(f"blockwise engine: {engine.describe()}")
         for number, (volume, outputs) in enumerate(zip(volumes, sets, strict=True), 1):
-            tag = "" if len(volumes) == 1 else f"[{number}/{len(volumes)}] "
-            step = (lambda t: lambda message: say(t + message))(tag)
+            step = say if len(volumes) == 1 else _tagged(say, f"[{number}/{len(volumes)}] ")
             info = segment_to_files(volume, outputs, engine=engine, say=step, **options)
             summaries.append(info)
             step(f"{volume.name}: wrote "
@@ -164,10 +188,9 @@ def segment_to_files(volume, outputs, *, operator="weighted", n_regions=None,
     """
     started = time.perf_counter()
     lazy = _is_lazy(volume)
+    _refuse_noise_when_lazy([volume], noise)
     if lazy:
         data = _validate.lazy_volume_array(volume.data)
-        if noise:
-            raise UsageError("--noise needs the volume in memory; drop --chunks")
     else:
         from .noise import add_value_noise
 
@@ -184,7 +207,7 @@ def segment_to_files(volume, outputs, *, operator="weighted", n_regions=None,
 
     def write(paths):
         storage = _storage(volume, data, request, paths, outputs, checksum, engine, say)
-        blocks = f" in {'x'.join(str(max(c)) for c in data.chunks)} blocks" if lazy else ""
+        blocks = f" in {storage.chunks} blocks" if lazy else ""
         say(f"{name}: curvature ({request.operator.name}) and Morse complex of a "
             f"{'x'.join(map(str, data.shape))} volume{blocks}")
         result, value_range = run_stages(data, request, storage)
@@ -255,6 +278,7 @@ def segment_series_files(series, level, out_dir, *, force=False, wait=False, say
     `series_to_files`; returns the summary."""
     from .outputs.spacetime import series_output_names
 
+    out_dir = check_out_dir(out_dir)
     names = series_output_names(series.name, series.shape[-1])
     with OutputSet(out_dir, f"{series.name}_iso", names, force=force, wait=wait) as outputs:
         for line in outputs.recovered:

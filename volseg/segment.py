@@ -32,7 +32,7 @@ from .curvature import (
 from .masks import MaskChoice, foreground_mask
 from .morse import MorseHierarchy, check_cut, descending_complex
 
-__all__ = ["Segmentation", "SegmentRequest", "Storage", "InMemory", "run_stages",
+__all__ = ["Segmentation", "SegmentRequest", "CutRequest", "Storage", "InMemory", "run_stages",
            "segment_volume", "segment_mesh", "DEFAULT_REGIONS", "AUTO_REGION_RANGE"]
 
 #: Default cut: 30 regions, the middle of the paper's 20-40 range.
@@ -144,18 +144,34 @@ class Segmentation:
 
 
 @dataclass(frozen=True)
-class SegmentRequest:
-    """What a segmentation of a volume is asked to do, checked once (`checked`).
+class CutRequest:
+    """The cut asked of a hierarchy: a persistence threshold, a region count, or
+    ``auto`` (the count in `AUTO_REGION_RANGE` at the largest persistence gap);
+    `checked` gives `DEFAULT_REGIONS` when nothing is asked."""
 
-    `min_persistence` or `n_regions` (or `auto`, the count at the largest persistence
-    gap) is the cut; `mask` a `foreground_mask` rule or array; `value_scale` None for
-    the default of the values after smoothing.
-    """
-
-    operator: Operator
     min_persistence: float | None
     n_regions: int | None
     auto: bool
+
+    @classmethod
+    def checked(cls, min_persistence=None, n_regions=None) -> CutRequest:
+        auto = isinstance(n_regions, str) and n_regions == "auto"
+        min_persistence, n_regions = check_cut(min_persistence, None if auto else n_regions)
+        if min_persistence is None and n_regions is None and not auto:
+            n_regions = DEFAULT_REGIONS
+        return cls(min_persistence, n_regions, auto)
+
+
+@dataclass(frozen=True)
+class SegmentRequest:
+    """What a segmentation of a volume is asked to do, checked once (`checked`).
+
+    `mask` is a `foreground_mask` rule or array; `value_scale` None for the default
+    of the values after smoothing.
+    """
+
+    operator: Operator
+    cut: CutRequest
     value_scale: float | None
     spacing: tuple
     padding: str
@@ -166,8 +182,7 @@ class SegmentRequest:
     def checked(cls, *, operator="weighted", min_persistence=None, n_regions=None,
                 value_scale=None, spacing=None, default_spacing=(1.0, 1.0, 1.0),
                 padding="linear", mask=None, smooth_sigma=0.0) -> SegmentRequest:
-        min_persistence, n_regions, auto = _cut_request(min_persistence, n_regions)
-        return cls(get_operator(operator), min_persistence, n_regions, auto,
+        return cls(get_operator(operator), CutRequest.checked(min_persistence, n_regions),
                    None if value_scale is None else _validate.value_scale(value_scale),
                    _validate.spacing(spacing, default_spacing), check_padding(padding), mask,
                    _validate.smooth(smooth_sigma))
@@ -237,35 +252,32 @@ def run_stages(data, request: SegmentRequest, storage: Storage | None = None
             values, request.operator, request.spacing, scale, request.padding,
             block_hooks=hooks))
     hierarchy, labels, k, threshold, cut = _morse_and_cut(
-        curvature, request, timings, mask=choice.mask, storage=storage)
+        curvature, request.cut, timings, mask=choice.mask, storage=storage)
     result = Segmentation(labels, curvature, hierarchy, k, request.operator.name, threshold,
                           scale, request.spacing, timings, cut, choice, request.smooth_sigma,
                           padding=request.padding)
     return result, value_range
 
 
-def _morse_and_cut(field, request, timings, *, mask=None, adjacency=None,
+def _morse_and_cut(field, cut: CutRequest, timings, *, mask=None, adjacency=None,
                    storage: Storage) -> tuple:
     """The Morse stage and the cut: (hierarchy, labels 1..k, k, threshold, cut)."""
     with _timed(timings, "morse"):
         hierarchy = descending_complex(field, adjacency=adjacency, mask=mask,
                                        block_hooks=storage.block_hooks)
     with _timed(timings, "cut"):
-        n_regions = request.n_regions
-        if request.auto:
-            n_regions = hierarchy.largest_gap(AUTO_REGION_RANGE)
-        region = hierarchy.region_of_maximum(request.min_persistence, n_regions)
+        n_regions = hierarchy.largest_gap(AUTO_REGION_RANGE) if cut.auto else cut.n_regions
+        region = hierarchy.region_of_maximum(cut.min_persistence, n_regions)
         labels = hierarchy.relabel(region)
         if hierarchy.mask is None:
             labels += 1  # regions 1..k; 0 is kept for voxels outside a mask
         k = int(region.max()) + 1
     with _timed(timings, "labels"):
         labels = storage.labels(labels, k)
-    threshold = (float(request.min_persistence) if request.min_persistence is not None
+    threshold = (float(cut.min_persistence) if cut.min_persistence is not None
                  else hierarchy.threshold_for(k))
-    cut = {"min_persistence": request.min_persistence, "n_regions": n_regions,
-           "auto": request.auto}
-    return hierarchy, labels, k, threshold, cut
+    asked = {"min_persistence": cut.min_persistence, "n_regions": n_regions, "auto": cut.auto}
+    return hierarchy, labels, k, threshold, asked
 
 
 @contextmanager
@@ -282,16 +294,6 @@ def _value_range(data, hooks) -> tuple:
         return tuple(v.item() for v in _compute(hooks, data.min(), data.max(),
                                                 stage="value range"))
     return (np.min(data).item(), np.max(data).item())
-
-
-def _cut_request(min_persistence, n_regions) -> tuple:
-    """(min_persistence, n_regions, auto) from what the caller asked; 30 regions when
-    nothing was."""
-    auto = isinstance(n_regions, str) and n_regions == "auto"
-    min_persistence, n_regions = check_cut(min_persistence, None if auto else n_regions)
-    if min_persistence is None and n_regions is None and not auto:
-        n_regions = DEFAULT_REGIONS
-    return min_persistence, n_regions, auto
 
 
 def segment_volume(
@@ -421,8 +423,7 @@ def segment_mesh(
     if boundary not in ("partial", "nan"):
         raise ValueError(f"unknown `boundary` {boundary!r}; choose 'partial' or 'nan'")
     rounds = _validate.rounds(smooth_rounds, "smooth_rounds")
-    min_persistence, n_cut, auto = _cut_request(min_persistence, n_regions)
-    request = SegmentRequest(entry, min_persistence, n_cut, auto, None, (), "", None, 0.0)
+    cut = CutRequest.checked(min_persistence, n_regions)
     vertices, simplices = _mesh.check_mesh(vertices, simplices)
     timings = {}
     with _timed(timings, "curvature"):
@@ -432,7 +433,7 @@ def segment_mesh(
     known = np.isfinite(curvature)   # boundary vertices with 'nan', vertices in no simplex
     mask = None if known.all() else known
     hierarchy, labels, k, threshold, cut = _morse_and_cut(
-        np.where(known, curvature, 0.0), request, timings, mask=mask,
+        np.where(known, curvature, 0.0), cut, timings, mask=mask,
         adjacency=_mesh.edges(simplices), storage=InMemory())
     used = "all vertices" if mask is None else "vertices with a complete star"
     choice = MaskChoice(mask, boundary, used, int(known.sum()))

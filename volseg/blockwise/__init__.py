@@ -11,13 +11,13 @@ through a work folder that lets a killed run resume.
   that choose the path and check the disk.
 """
 
-from ._pipeline import (
+from ._resume import WorkFolder
+from ._storage import (
     DEFAULT_CHUNKS,
     DISK_BYTES_PER_VOXEL,
     IN_MEMORY_BYTES_PER_VOXEL,
     BlockwiseStorage,
 )
-from ._resume import WorkFolder
 
 __all__ = ["BlockwiseStorage", "WorkFolder", "DEFAULT_CHUNKS", "IN_MEMORY_BYTES_PER_VOXEL",
            "DISK_BYTES_PER_VOXEL"]

@@ -149,7 +149,7 @@ def _pairs_of_block(halo_values, halo_cells, origin, shape, offsets):
     """Stage 4: (a, b, saddle gid, saddle value) of the block's edges of the cell
     graph's maximum spanning forest: about one edge per cell.
 
-    The in-memory cross-edge pass (`morse._cross_edges`) runs on the block with its
+    The in-memory cross-edge pass (`_edges._cross_edges`) runs on the block with its
     halo as the padded field: the owned voxels in the mask are its vertices, the halo
     holds the neighbours' values (-inf outside the volume and the mask). An edge is
     seen from its smaller cell's voxel, so each edge between two blocks is found by
@@ -168,7 +168,7 @@ def _pairs_of_block(halo_values, halo_cells, origin, shape, offsets):
         return nothing, nothing, np.zeros(0, dtype=gid_type), np.zeros(0)
     graph = _Neighbourhood(values.ravel(), owned, True, offsets @ strides,
                            np.zeros(1, np.int64), np.zeros(1, np.int64), values.shape)
-    a, b, saddle = _cross_edges(_kernels, graph, local.ravel(), len(cells))
+    a, b, saddle = _cross_edges(graph, local.ravel(), len(cells))
     order = _saddle_order(graph.values[saddle], saddle, a, b)
     keep = np.zeros(len(a), dtype=bool)
     _kernels.spanning_edges(a, b, order, len(cells), keep)

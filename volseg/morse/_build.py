@@ -18,7 +18,7 @@ from ._phases import _Phases
 __all__ = ["descending_complex"]
 
 
-def _descending_cells(kernels, graph: _Neighbourhood, phases: _Phases):
+def _descending_cells(graph: _Neighbourhood, phases: _Phases):
     """(cell per node, -1 off the vertices; maxima nodes by decreasing value): cell[v] is
     the id of the maximum v's steepest ascent reaches."""
     index_type = np.int32 if len(graph.values) < 2**31 - 1 else np.int64
@@ -49,11 +49,11 @@ class _MergeEvents:
     saddle: NDArray[np.int64]
 
 
-def _merge_events(kernels, graph: _Neighbourhood, cell, n_maxima,
+def _merge_events(graph: _Neighbourhood, cell, n_maxima,
                   phases: _Phases) -> _MergeEvents:
     """One edge per pair of adjacent cells (its highest saddle), sorted by (saddle value,
     saddle vertex, pair), then one Kruskal over them from the highest saddle down."""
-    edge_a, edge_b, edge_v = _cross_edges(kernels, graph, cell, n_maxima)
+    edge_a, edge_b, edge_v = _cross_edges(graph, cell, n_maxima)
     phases.done("cross-cell edges")
     order = _saddle_order(graph.values[edge_v], edge_v, edge_a, edge_b)
     phases.done("saddle order (sort, ties)")
@@ -115,8 +115,8 @@ def descending_complex(field: ArrayLike, *, adjacency=None, connectivity="kuhn",
     values, mask = _validate_field(field, mask, adjacency)
     graph = _neighbourhood(values, mask, adjacency, connectivity)
     phases.done("checks and neighbourhood")
-    cell, maxima = _descending_cells(kernels, graph, phases)
-    events = _merge_events(kernels, graph, cell, len(maxima), phases)
+    cell, maxima = _descending_cells(graph, phases)
+    events = _merge_events(graph, cell, len(maxima), phases)
     shape = values.shape
     if graph.grid:
         cells = cell.reshape(graph.padded_shape)[(slice(1, -1),) * values.ndim].astype(np.int32)

@@ -14,7 +14,7 @@ __all__ = []
 _CHUNK_VERTICES = 1 << 20
 
 
-def _cross_edges(kernels, graph, cell, n_cells):
+def _cross_edges(graph, cell, n_cells):
     """(a, b, saddle) of every pair of adjacent cells, a < b, with its highest saddle.
 
     The vertices are grouped by cell (a counting sort), then each cell's edges to
@@ -32,7 +32,7 @@ def _cross_edges(kernels, graph, cell, n_cells):
     n_real = len(graph.vertices)
     starts = np.empty(n_cells + 1, dtype=np.int64)
     members = np.empty(n_real, dtype=graph.vertices.dtype)
-    kernels.group_by_cell(graph.vertices, cell, n_cells, starts, members)
+    _kernels.group_by_cell(graph.vertices, cell, n_cells, starts, members)
     graph.vertices = None  # members hold every vertex now: 4 bytes per voxel less at the peak
     # Cells in the order of their first vertex, so that the walk moves through memory.
     # (A cell may have no vertex: the blockwise pass's cells seen only in a block's halo.)
@@ -56,10 +56,10 @@ def _cross_edges(kernels, graph, cell, n_cells):
     table_sizes = np.maximum(16, 2 ** np.ceil(np.log2(np.maximum(2 * largest, 1)))).astype(np.int64)
     args = (flat, members, starts, visit, bounds, grid, offsets, indptr, indices, cell, degree,
             table_sizes)
-    out, out_starts, counts = _pair_pass(kernels, args, chunks, capacity)
+    out, out_starts, counts = _pair_pass(args, chunks, capacity)
     over = np.flatnonzero(counts > capacity)
     if len(over):
-        room, room_starts, _ = _pair_pass(kernels, args, over, counts[over])
+        room, room_starts, _ = _pair_pass(args, over, counts[over])
     del args, members, starts, visit
     pieces = []
     for c in range(n_chunks):
@@ -71,14 +71,14 @@ def _cross_edges(kernels, graph, cell, n_cells):
     return tuple(np.concatenate([p[k] for p in pieces]) for k in range(3))
 
 
-def _pair_pass(kernels, args, chunks, capacity):
+def _pair_pass(args, chunks, capacity):
     flat, members, starts, visit, bounds, grid, offsets, indptr, indices, cell, degree, sizes = args
     out_starts = np.concatenate([[0], np.cumsum(capacity)[:-1]]).astype(np.int64)
     counts = np.zeros(len(chunks), dtype=np.int64)
     total = int(capacity.sum())
     out = [np.empty(total, dtype=cell.dtype), np.empty(total, dtype=cell.dtype),
            np.empty(total, dtype=members.dtype)]
-    kernels.cell_pairs(flat, members, starts, visit, bounds, chunks, grid, offsets, indptr,
+    _kernels.cell_pairs(flat, members, starts, visit, bounds, chunks, grid, offsets, indptr,
                        indices, cell, degree, sizes, *out, out_starts,
                        capacity.astype(np.int64), counts)
     return out, out_starts, counts

@@ -82,13 +82,9 @@ class BlockwiseStorage(Storage):
         self.frame = frame or Frame.from_spacing(request.spacing)
         self.work_folder = folder / f".{stem}.volseg-work"
         self.work = None
-
-    def _run(self, *collections, stage: str):
-        if self.engine is not None:
-            return self.engine.compute(*collections, stage=stage)
-        import dask
-
-        return dask.compute(*collections)
+        #: The blocks' edge per axis, as the messages and the summary give it ("64x64x64").
+        self.chunks = "x".join(str(max(c)) for c in data.chunks)
+        self._run = engine.compute if engine is not None else BlockHooks().compute
 
     def begin(self, choice):
         """The work folder (keyed by everything that changes a block), after the free
@@ -141,7 +137,7 @@ class BlockwiseStorage(Storage):
 
     def describe(self, hierarchy) -> dict:
         """The summary's ``blockwise`` entry."""
-        return {"chunks": "x".join(str(max(c)) for c in self.data.chunks),
+        return {"chunks": self.chunks,
                 "engine": self.engine.describe() if self.engine else "dask",
                 "resumed": self.work.resumed,
                 "morse_phases_s": {phase: round(seconds, 4)
