@@ -7,7 +7,8 @@ Grid curvature (weighted, Laplace-Beltrami) at each size: the base revision's ke
 (a temporary git worktree), today's, and the floor kernel (`_floor.py`, the weighted
 operator's unavoidable arithmetic): voxels/s, today/base, and the fraction of the
 floor's speed reached. Then bytes per voxel beyond the input at 256^3 for both
-kernels (peak RSS of a fresh process that only loaded the input from .npy), and the Morse build (on the weighted curvature of the same field) for the
+kernels (peak RSS of a fresh process that only loaded the input from .npy), and the
+Morse build (on the weighted curvature of the same field) for the
 base and today, with today's time per phase. Every figure comes from a fresh
 interpreter after a warm-up call (numba compile and cache load are not timed); best
 of --repeat; base and today alternate.

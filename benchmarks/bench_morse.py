@@ -28,7 +28,8 @@ base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss  # memory beyond input
 start = time.perf_counter(); h = descending_complex(field); build = time.perf_counter() - start
 start = time.perf_counter(); labels = h.segment(n_regions=30); cut = time.perf_counter() - start
 threshold = h.threshold_for(30)
-start = time.perf_counter(); h.segment(min_persistence=threshold); cut2 = time.perf_counter() - start
+start = time.perf_counter(); h.segment(min_persistence=threshold)
+cut2 = time.perf_counter() - start
 extra = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - base) * 1024 / field.size
 print(json.dumps(dict(build=build, cut=cut, cut_threshold=cut2, total=build + cut,
       maxima=len(h.maxima), bytes_per_voxel=extra, threshold=threshold)))

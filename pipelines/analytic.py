@@ -258,7 +258,8 @@ def _panel(ax, summary, experiment, tessellation, x_key, title, xlabel, log_x=Tr
             if not line:
                 continue
             xs, ys = zip(*line, strict=True)
-            label = REGISTRY[operator].label + (f", {group.replace('_', ' ')} {value}" if group else "")
+            label = REGISTRY[operator].label + (f", {group.replace('_', ' ')} "
+                                                f"{value}" if group else "")
             ax.plot(xs, ys, ["o-", "s--", "^:"][number % 3], color=REGISTRY[operator].colour,
                     label=label, markersize=4)
     if log_x:

@@ -46,7 +46,8 @@ def relative_errors(estimate, exact) -> dict:
     known = np.isfinite(estimate)
     e, h = estimate[known], exact[known]
     return {"relative_rms": float(np.sqrt(np.mean((e - h) ** 2)) / np.mean(np.abs(h))),
-            "median_ratio_minus_1": float(np.median(e / h) - 1), "vertices_measured": int(known.sum())}
+            "median_ratio_minus_1": float(np.median(e / h) - 1),
+            "vertices_measured": int(known.sum())}
 
 
 def hypersurface_rows(resolutions, say) -> list[dict]:
@@ -190,7 +191,8 @@ def figure(rows, path):
 
     names = list(HYPERSURFACES)
     fig, axes = plt.subplots(2, len(names), figsize=(4.2 * len(names), 7.5), sharex=True)
-    styles = {("marching", "weighted"): ("C0", "--"), ("marching", "laplace_beltrami"): ("C1", "--"),
+    styles = {("marching", "weighted"): ("C0", "--"),
+              ("marching", "laplace_beltrami"): ("C1", "--"),
               ("relaxed", "weighted"): ("C0", "-"), ("relaxed", "laplace_beltrami"): ("C1", "-")}
     for row_index, setting in enumerate(("raw", "smoothed")):
         for column, name in enumerate(names):
@@ -224,9 +226,12 @@ def summary_text(rows, cube) -> str:
         for kind in ("marching", "relaxed"):
             for operator in OPERATORS:
                 r = next(r for r in rows if r["surface"] == name and r["resolution"] == top
-                         and r["mesh"] == kind and r["operator"] == operator and r["setting"] == "raw")
-                lines.append(f"  {name:12s} {top}^4 {kind:8s} {operator:16s} rms {r['relative_rms']:.4f}"
-                             f"  median {r['median_ratio_minus_1']:+.4f}  min dihedral {r['min_dihedral']:.1f}")
+                         and r["mesh"] == kind and r["operator"] == operator
+                         and r["setting"] == "raw")
+                lines.append(f"  {name:12s} {top}^4 {kind:8s} {operator:16s} rms "
+                             f"{r['relative_rms']:.4f}"
+                             f"  median {r['median_ratio_minus_1']:+.4f}  min dihedral "
+                             f"{r['min_dihedral']:.1f}")
     lines.append("\nCube meshes (paper's six functions, normalized RMS, mean over seeds):")
     for name in dict.fromkeys(r["mesh"] for r in cube):
         parts = []

@@ -44,7 +44,8 @@ def test_exact_derivatives_match_finite_differences(name, rng):
     for i in range(3):
         for j in range(3):
             ei, ej = np.eye(3)[i], np.eye(3)[j]
-            hess[:, i, j] = (at(*(ei + ej)) - at(*(ei - ej)) - at(*(ej - ei)) + at(*(-ei - ej))) / (4 * h * h)
+            hess[:, i, j] = (at(*(ei + ej)) - at(*(ei - ej)) - at(*(ej - ei))
+                             + at(*(-ei - ej))) / (4 * h * h)
     np.testing.assert_allclose(f.mean_curvature(x, y, z), graph_mean_curvature(g, hess), atol=1e-5)
 
 
@@ -79,7 +80,8 @@ def test_both_operators_converge_at_second_order_on_grids(operator):
         per_function = []
         for f in FUNCTIONS.values():
             estimate = grid_curvature(f(x, y, z), operator, spacing=(h, h, h), value_scale=1.0)
-            per_function.append(normalized_rms_error(estimate[inner], f.mean_curvature(x, y, z)[inner]))
+            exact = f.mean_curvature(x, y, z)
+            per_function.append(normalized_rms_error(estimate[inner], exact[inner]))
         errors.append(np.mean(per_function))
     spacing = [2 / (r - 1) for r in resolutions]
     slope = np.polyfit(np.log(spacing), np.log(errors), 1)[0]
@@ -137,6 +139,7 @@ def test_implicit_mean_curvature_sphere_graph_and_cylinder():
             lambda p, f=function: f(p[:, 0], p[:, 1], p[:, 2]) - p[:, 3], on))
         assert np.allclose(implicit, function.mean_curvature(*x.T), atol=1e-8)
     # Cylinder S^1(r) x R^2 with outward normals: H = 1 / (3 r).
-    cylinder = np.c_[0.5 * np.cos(np.arange(10)), 0.5 * np.sin(np.arange(10)), rng.normal(size=(10, 2))]
+    cylinder = np.c_[0.5 * np.cos(np.arange(10)), 0.5 * np.sin(np.arange(10)),
+                     rng.normal(size=(10, 2))]
     field = lambda p: -(p[:, 0] ** 2 + p[:, 1] ** 2)  # noqa: E731
     assert np.allclose(implicit_mean_curvature(*derivatives(field, cylinder)), 1 / 1.5, rtol=1e-8)

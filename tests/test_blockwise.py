@@ -38,7 +38,8 @@ def test_blockwise_curvature_equals_in_memory(volume, operator, boundary):
     for chunks in CHUNKINGS[:3]:
         lazy = grid_curvature(da.from_array(volume, chunks=chunks), operator, padding=boundary,
                               spacing=spacing)
-        assert isinstance(lazy, da.Array) and lazy.chunks == da.from_array(volume, chunks=chunks).chunks
+        assert isinstance(lazy, da.Array)
+        assert lazy.chunks == da.from_array(volume, chunks=chunks).chunks
         # Bit-identical: each block adds its sums in the in-memory order.
         assert np.array_equal(lazy.compute(), reference)
 

@@ -103,7 +103,8 @@ def test_sphere_n2_pointwise_median_converges():
 def test_graph_peak_is_positive_and_bowl_negative():
     # DESIGN.md section 2: f = -0.4|x|^2 has H(0) = +0.8 (n = 3), f = +0.4|x|^2 has -0.8.
     for sign in (-1, 1):
-        v, s = tessellation.kuhn_cube_mesh(33, lambda x, y, z, sign=sign: sign * 0.4 * (x * x + y * y + z * z))
+        v, s = tessellation.kuhn_cube_mesh(
+            33, lambda x, y, z, sign=sign: sign * 0.4 * (x * x + y * y + z * z))
         centre = np.argmin(np.linalg.norm(v[:, :3], axis=1))
         for operator in ORIENTED[::2]:
             assert_allclose(vertex_curvature(v, s, operator)[centre], -sign * 0.8, rtol=1e-2)

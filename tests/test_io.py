@@ -14,7 +14,8 @@ def xyz_volume(shape=(5, 4, 3), dtype=np.uint16):
 
 
 def raw_bytes(data, order="<"):
-    return np.ascontiguousarray(data.transpose(2, 1, 0)).astype(data.dtype.newbyteorder(order)).tobytes()
+    swapped = data.dtype.newbyteorder(order)
+    return np.ascontiguousarray(data.transpose(2, 1, 0)).astype(swapped).tobytes()
 
 
 @pytest.mark.parametrize("dtype", ["uint8", "uint16", "int16", "float32", "float64"])
@@ -123,7 +124,8 @@ def test_errors_name_the_file_and_the_problem(tmp_path):
     bad = np.zeros((3, 3, 3), np.float32)
     bad[1, 2, 0] = np.nan
     np.save(tmp_path / "nan.npy", bad)
-    with pytest.raises(ValueError, match=r"holds 1 NaN or infinite values \(first at \[x, y, z\] = \(1, 2, 0\)\)"):
+    with pytest.raises(ValueError, match=r"holds 1 NaN or infinite values \(first at \[x, y, z\] "
+                                         r"= \(1, 2, 0\)\)"):
         read_volume(tmp_path / "nan.npy")
     np.save(tmp_path / "flat.npy", np.zeros((3, 3)))
     with pytest.raises(ValueError, match="must be 3-D"):
@@ -191,7 +193,8 @@ def test_detached_headers_read_only_their_own_folder(tmp_path):
                                       f"encoding: raw\ndata file: {data_name}\n")
         (inner / "h.dat").write_text(f"ObjectFileName: {data_name}\nResolution: 5 4 3\n")
         for header in ["h.nhdr", "h.dat"]:
-            with pytest.raises(VolumeFileError, match=r"h\.(nhdr|dat): its .* outside the header's folder"):
+            with pytest.raises(VolumeFileError, match=r"h\.(nhdr|dat): its .* outside the "
+                                                      r"header's folder"):
                 read_volume(inner / header)
             volume = read_volume(inner / header, allow_external_data=True)
             assert volume.files == (inner / header, inner / data_name)
@@ -336,7 +339,8 @@ def test_output_set_refuses_existing_files_and_removes_its_staging(tmp_path):
             "a": tmp_path / "s_a.txt", "b": tmp_path / "s_b.txt"}
     with pytest.raises(OutputError, match="s_a.txt exists .* use --force"):
         OutputSet(tmp_path, "s", names).acquire()
-    with OutputSet(tmp_path, "s", names, force=True) as out, pytest.raises(RuntimeError, match="s_b"):
+    with OutputSet(tmp_path, "s", names, force=True) as out, \
+            pytest.raises(RuntimeError, match="s_b"):
         out.commit(lambda p: p["a"].write_text("2"))  # a writer that forgot a file
     assert (tmp_path / "s_a.txt").read_text() == "1"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["s_a.txt", "s_b.txt"]

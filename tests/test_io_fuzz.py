@@ -40,7 +40,8 @@ VALID = {
                           b"Format: USHORT\n", "v.raw": RAW},
     "dat-binary": {"b.dat": np.array([6, 5, 4], "<u2").tobytes() + RAW},
     "nrrd": {"a.nrrd": NRRD_HEAD.format(encoding="raw").encode() + b"\n" + RAW},
-    "nrrd-gzip": {"g.nrrd": NRRD_HEAD.format(encoding="gzip").encode() + b"\n" + gzip.compress(RAW)},
+    "nrrd-gzip": {"g.nrrd": NRRD_HEAD.format(encoding="gzip").encode() + b"\n"
+                  + gzip.compress(RAW)},
     "nhdr": {"d.nhdr": NRRD_HEAD.format(encoding="raw").encode() + b"data file: d.raw\n",
              "d.raw": RAW},
     "npy": {"n.npy": _npy()},
@@ -98,7 +99,8 @@ def _check_outcome(folder, files):
     assert all(s > 0 for s in volume.spacing)
 
 
-FUZZ = settings(max_examples=int(os.environ.get("VOLSEG_FUZZ_EXAMPLES", 150)), deadline=2000, derandomize=True,
+FUZZ = settings(max_examples=int(os.environ.get("VOLSEG_FUZZ_EXAMPLES", 150)), deadline=2000,
+                derandomize=True,
                 suppress_health_check=[HealthCheck.function_scoped_fixture])
 
 

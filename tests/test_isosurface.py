@@ -28,7 +28,8 @@ def euler_characteristic(simplices):
         assert base ** min(size, k - 1) < 2 ** 62
         sub = np.sort(np.concatenate([simplices[:, list(c)]
                                       for c in itertools.combinations(range(k), size)]), axis=1)
-        keys = sub @ (base ** np.arange(size, dtype=np.int64)) if size < k else np.arange(len(simplices))
+        keys = (sub @ (base ** np.arange(size, dtype=np.int64)) if size < k
+                else np.arange(len(simplices)))
         total += (-1) ** (size - 1) * len(np.unique(keys))
     return total
 
@@ -49,7 +50,8 @@ def test_circle_is_a_closed_counter_clockwise_polygon():
     assert surface.simplices.shape[1] == 2
     assert_closed_oriented_outward(surface)
     # Each vertex starts one segment and ends one: a cycle, walked counter-clockwise.
-    assert sorted(surface.simplices[:, 0]) == sorted(surface.simplices[:, 1]) == list(range(len(surface.vertices)))
+    every = list(range(len(surface.vertices)))
+    assert sorted(surface.simplices[:, 0]) == sorted(surface.simplices[:, 1]) == every
     x, y = surface.vertices[surface.simplices[:, 0]].T
     x2, y2 = surface.vertices[surface.simplices[:, 1]].T
     assert 0.5 * np.sum(x * y2 - x2 * y) > 0          # positive signed area
@@ -99,7 +101,8 @@ def test_relaxation_makes_the_three_sphere_curvature_right():
     assert np.sqrt(np.mean((after - 1) ** 2)) < 0.6
     assert np.abs(np.linalg.norm(relaxed.vertices, axis=1) - r).max() < 1e-3   # still on it
     assert_closed_oriented_outward(relaxed)
-    assert quality(relaxed.vertices, relaxed.simplices)["min"] > 10 > quality(raw.vertices, raw.simplices)["min"]
+    assert (quality(relaxed.vertices, relaxed.simplices)["min"] > 10
+            > quality(raw.vertices, raw.simplices)["min"])
 
 
 def test_planes_through_the_box_have_boundary_and_zero_curvature():
@@ -111,7 +114,8 @@ def test_planes_through_the_box_have_boundary_and_zero_curvature():
     normals = mesh.simplex_normals(surface.vertices, surface.simplices)
     assert np.allclose(normals, [1, 0, 0])                         # toward lower values
     boundary = np.unique(surface.boundary_faces)
-    on_box = np.isclose(surface.vertices[boundary][:, 1:], 0) | np.isclose(surface.vertices[boundary][:, 1:], 1)
+    ends = surface.vertices[boundary][:, 1:]
+    on_box = np.isclose(ends, 0) | np.isclose(ends, 1)
     assert on_box.any(axis=1).all()
     curvature = vertex_curvature(surface.vertices, surface.simplices, boundary="partial")
     assert np.allclose(curvature, 0, atol=1e-12)
@@ -200,13 +204,16 @@ def test_relaxation_spline_interpolates_and_has_its_exact_gradient(shape, rng):
     field = rng.standard_normal(shape)
     spacing = np.linspace(0.5, 1.5, len(shape))
     spline = _Spline(field, spacing, np.zeros(len(shape)))
-    grid = np.stack(np.meshgrid(*[np.arange(n) for n in shape], indexing="ij"), -1).reshape(-1, len(shape))
+    grid = np.stack(np.meshgrid(*[np.arange(n) for n in shape], indexing="ij"), -1)
+    grid = grid.reshape(-1, len(shape))
     values, _ = spline.value_and_gradient(grid * spacing)
     assert np.allclose(values, field.ravel(), atol=1e-12)
     points = rng.uniform(0.5, min(shape) - 1.5, (40, len(shape))) * spacing
     _, gradient = spline.value_and_gradient(points)
     step = 1e-6
-    differences = np.stack([
-        (spline.value_and_gradient(points + step * e)[0] - spline.value_and_gradient(points - step * e)[0])
-        / (2 * step) for e in np.eye(len(shape))], axis=1)
+    def value(p):
+        return spline.value_and_gradient(p)[0]
+
+    differences = np.stack([(value(points + step * e) - value(points - step * e)) / (2 * step)
+                            for e in np.eye(len(shape))], axis=1)
     assert np.allclose(gradient, differences, atol=1e-6)

@@ -112,7 +112,8 @@ def test_grid_and_explicit_adjacency_give_the_same_partition(rng):
         assert_array_equal(other.maxima, grid.maxima)
         np.testing.assert_array_equal(other.persistence, grid.persistence)
         for k in [1, 5, len(grid.maxima)]:
-            assert_array_equal(other.segment(n_regions=k).reshape(f.shape), grid.segment(n_regions=k))
+            assert_array_equal(other.segment(n_regions=k).reshape(f.shape),
+                               grid.segment(n_regions=k))
 
 
 def test_networkx_node_order_is_documented_order():

@@ -71,7 +71,8 @@ def test_time_slices_are_the_isosurfaces_of_the_time_steps():
         points = surface.vertices[piece.vertex]
         assert np.allclose(points[:, 3], 0.5 * piece.step)              # in the step's hyperplane
         # The same triangles as the step's own 3-D isosurface.
-        assert canonical(points[piece.triangles][..., :3]) == canonical(alone.vertices[alone.simplices])
+        assert (canonical(points[piece.triangles][..., :3])
+                == canonical(alone.vertices[alone.simplices]))
 
 
 def test_segment_series_moving_blob_relaxed_slices_stay_in_their_steps():

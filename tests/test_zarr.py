@@ -68,7 +68,8 @@ def test_bad_stores_are_refused_with_the_reason(tmp_path, volume):
     with pytest.raises(VolumeFileError, match="1 of 27 chunks are missing"):
         read_volume(tmp_path / "holes.zarr")
     write_zarr(tmp_path / "bad.zarr", volume, chunks=(8, 8, 8))
-    sorted(p for p in (tmp_path / "bad.zarr" / "c").rglob("*") if p.is_file())[5].write_bytes(b"junk")
+    chunk_files = sorted(p for p in (tmp_path / "bad.zarr" / "c").rglob("*") if p.is_file())
+    chunk_files[5].write_bytes(b"junk")
     lazy = read_volume(tmp_path / "bad.zarr")            # opens: the chunk is read later
     with pytest.raises(VolumeFileError, match=r"chunk at \[.*\] is unreadable"):
         lazy.data.compute()
@@ -86,8 +87,8 @@ def test_cli_zarr_in_zarr_out_equals_in_memory(tmp_path, volume, capsys):
     assert np.array_equal(blockwise, in_memory)
     curvature = zarr.open(str(tmp_path / "z" / "vol_curvature.zarr"), mode="r")[:]
     assert curvature.dtype == np.float64       # what the Morse stage read, exactly
-    assert np.array_equal(curvature.astype(np.float32),
-                          np.asanyarray(nibabel.load(tmp_path / "m" / "vol_curvature.nii.gz").dataobj))
+    nifti = nibabel.load(tmp_path / "m" / "vol_curvature.nii.gz")
+    assert np.array_equal(curvature.astype(np.float32), np.asanyarray(nifti.dataobj))
     a = json.loads((tmp_path / "z" / "vol_summary.json").read_text())
     b = json.loads((tmp_path / "m" / "vol_summary.json").read_text())
     assert a["regions"] == b["regions"] and a["n_maxima"] == b["n_maxima"]
@@ -102,7 +103,8 @@ def test_cli_zarr_in_zarr_out_equals_in_memory(tmp_path, volume, capsys):
     # --chunks takes the same path for any input; outputs are refused, then replaced.
     assert main(["segment", str(tmp_path / "vol.npy"), "-o", str(tmp_path / "z2"), "--regions",
                  "9", "--chunks", "9", "-q"]) == 0
-    assert np.array_equal(zarr.open(str(tmp_path / "z2" / "vol_labels.zarr"), mode="r")[:], in_memory)
+    stored = zarr.open(str(tmp_path / "z2" / "vol_labels.zarr"), mode="r")[:]
+    assert np.array_equal(stored, in_memory)
     capsys.readouterr()
     assert main(["segment", str(tmp_path / "vol.zarr"), "-o", str(tmp_path / "z"), "-q"]) == 2
     assert "exists" in capsys.readouterr().err

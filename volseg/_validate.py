@@ -36,7 +36,8 @@ def volume_array(volume, name: str = "volume", *, source=None,
     is the exception type raised (the readers raise `VolumeFileError`).
     """
     data = np.asarray(volume)
-    what = f"{source}: the {'volume' if ndim == 3 else 'series'}" if source is not None else f"`{name}`"
+    kind = "volume" if ndim == 3 else "series"
+    what = f"{source}: the {kind}" if source is not None else f"`{name}`"
     _check_layout(data, what, error, ndim)
     if data.dtype.kind == "f":
         bad = ~np.isfinite(data)

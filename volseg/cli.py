@@ -126,7 +126,8 @@ def _add_isosurface(sub):
                      help="mesh-quality rounds (tangential relaxation + projection onto the "
                      "level set; 0: the raw marching mesh; default 10)")
     iso.add_argument("--smooth-rounds", "--smooth", dest="smooth_rounds", type=int, default=10,
-                     metavar="N", help="rounds of 1-ring averaging of the curvature before the Morse "
+                     metavar="N", help="rounds of 1-ring averaging of the curvature before the "
+                                       "Morse "
                      "stage (the paper smooths estimates on irregular meshes; default 10, "
                      "0: none)")
     iso.add_argument("--boundary", choices=("partial", "nan"), default="partial",
@@ -174,7 +175,8 @@ def _regions(text):
     try:
         return int(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number of regions or 'auto', got {text!r}") from None
+        raise argparse.ArgumentTypeError("expected a number of regions or 'auto', got "
+                                         f"{text!r}") from None
 
 
 def _progress(quiet):
@@ -197,7 +199,8 @@ def _check_cut_options(args):
     if isinstance(args.regions, int) and args.regions < 1:
         raise UsageError(f"--regions must be at least 1, got {args.regions}")
     if args.min_persistence is not None and not args.min_persistence >= 0:
-        raise UsageError(f"--min-persistence must be a non-negative number, got {args.min_persistence}")
+        raise UsageError("--min-persistence must be a non-negative number, got "
+                         f"{args.min_persistence}")
 
 
 def _cmd_segment(args):

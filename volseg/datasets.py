@@ -182,7 +182,8 @@ def demo_series(n: int = 24, steps: int = 12):
         centre = 0.55 * (1 - s) + 0.12 * s           # half the separation, closing in
         wobble = 0.15 * np.sin(np.pi * s)           # and drifting up while they do
         f = (np.exp(-((x - centre) ** 2 + (y - wobble) ** 2 + z ** 2) / (2 * 0.22 ** 2))
-             + 0.9 * np.exp(-((x + centre) ** 2 + (y + 0.5 * wobble) ** 2 + z ** 2) / (2 * 0.2 ** 2)))
+             + 0.9 * np.exp(-((x + centre) ** 2 + (y + 0.5 * wobble) ** 2 + z ** 2)
+                            / (2 * 0.2 ** 2)))
         out[..., t] = f
     return out
 

@@ -53,7 +53,8 @@ def check_mesh(
     vertices = np.asarray(vertices, dtype=np.float64)
     simplices = np.asarray(simplices)
     if vertices.ndim != 2 or vertices.shape[1] < 2:
-        raise ValueError(f"`vertices` must be a (V, d) array with d >= 2, got shape {vertices.shape}")
+        raise ValueError("`vertices` must be a (V, d) array with d >= 2, got shape "
+                         f"{vertices.shape}")
     d = vertices.shape[1]
     if simplices.ndim != 2 or simplices.shape[1] < 2:
         raise ValueError(
@@ -425,7 +426,8 @@ def orient(simplices: ArrayLike) -> NDArray[np.intp]:
     # pair links equal states, an inconsistent one links opposite states.
     a, b = pairs[:, 0], pairs[:, 1]
     rows = np.concatenate([a, a + n_simplices])
-    cols = np.concatenate([np.where(flip_needed, b + n_simplices, b), np.where(flip_needed, b, b + n_simplices)])
+    cols = np.concatenate([np.where(flip_needed, b + n_simplices, b),
+                           np.where(flip_needed, b, b + n_simplices)])
     graph = coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(2 * n_simplices,) * 2)
     _, label = connected_components(graph, directed=False)
     kept, flipped = label[:n_simplices], label[n_simplices:]
@@ -473,7 +475,8 @@ def vertex_adjacency(simplices: ArrayLike, n_vertices: int):
     return sparse.csr_matrix((np.ones(len(rows)), (rows, cols)), shape=(n_vertices, n_vertices))
 
 
-def ring_average(values: ArrayLike, simplices: ArrayLike, iterations: int = 1) -> NDArray[np.float64]:
+def ring_average(values: ArrayLike, simplices: ArrayLike,
+                 iterations: int = 1) -> NDArray[np.float64]:
     """`iterations` rounds of replacing each vertex value by the mean over its closed
     1-ring (itself and its edge neighbours); NaN values are left out of the means
     (and stay NaN), so boundary NaNs do not spread.

@@ -8,7 +8,8 @@ from numpy.typing import ArrayLike, NDArray
 __all__ = ["add_value_noise", "add_normal_noise"]
 
 
-def add_value_noise(volume: ArrayLike, percent: float, *, seed=None, reference_range=None) -> NDArray[np.float64]:
+def add_value_noise(volume: ArrayLike, percent: float, *, seed=None,
+                    reference_range=None) -> NDArray[np.float64]:
     """The volume plus Gaussian noise of sigma = `percent` % of its value range.
 
     Parameters

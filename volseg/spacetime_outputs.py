@@ -5,5 +5,6 @@ import warnings
 from .outputs.spacetime import *  # noqa: F403
 from .outputs.spacetime import __all__  # noqa: F401
 
-warnings.warn("volseg.spacetime_outputs is deprecated: import volseg.outputs.spacetime", DeprecationWarning,
+warnings.warn("volseg.spacetime_outputs is deprecated: import "
+              "volseg.outputs.spacetime", DeprecationWarning,
               stacklevel=2)

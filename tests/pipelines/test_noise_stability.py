@@ -132,7 +132,8 @@ def test_a_failing_task_is_recorded_and_the_others_finish(tmp_path, capfd):
 def _count_done(db):
     try:
         with sqlite3.connect(db, timeout=5) as connection:
-            return connection.execute("SELECT COUNT(*) FROM tasks WHERE status='done'").fetchone()[0]
+            return connection.execute("SELECT COUNT(*) FROM tasks WHERE "
+                                      "status='done'").fetchone()[0]
     except sqlite3.OperationalError:  # not created yet
         return 0
 

@@ -57,9 +57,12 @@ def _intrinsic_slab(fp, i, h, tables, acc):
                     lu = math.sqrt(e[0, 0] ** 2 + e[0, 1] ** 2 + e[0, 2] ** 2 + e[0, 3] ** 2)
                     lv = math.sqrt(e[1, 0] ** 2 + e[1, 1] ** 2 + e[1, 2] ** 2 + e[1, 3] ** 2)
                     lw = math.sqrt(e[2, 0] ** 2 + e[2, 1] ** 2 + e[2, 2] ** 2 + e[2, 3] ** 2)
-                    uv = e[0, 0] * e[1, 0] + e[0, 1] * e[1, 1] + e[0, 2] * e[1, 2] + e[0, 3] * e[1, 3]
-                    uw = e[0, 0] * e[2, 0] + e[0, 1] * e[2, 1] + e[0, 2] * e[2, 2] + e[0, 3] * e[2, 3]
-                    vw = e[1, 0] * e[2, 0] + e[1, 1] * e[2, 1] + e[1, 2] * e[2, 2] + e[1, 3] * e[2, 3]
+                    uv = (e[0, 0] * e[1, 0] + e[0, 1] * e[1, 1]
+                          + e[0, 2] * e[1, 2] + e[0, 3] * e[1, 3])
+                    uw = (e[0, 0] * e[2, 0] + e[0, 1] * e[2, 1]
+                          + e[0, 2] * e[2, 2] + e[0, 3] * e[2, 3])
+                    vw = (e[1, 0] * e[2, 0] + e[1, 1] * e[2, 1]
+                          + e[1, 2] * e[2, 2] + e[1, 3] * e[2, 3])
                     denominator = lu * lv * lw + uv * lw + uw * lv + vw * lu
                     acc[1, i + offsets[q, 0], j + offsets[q, 1], k + offsets[q, 2]] += (
                         2.0 * math.atan2(6.0 * vol, denominator))

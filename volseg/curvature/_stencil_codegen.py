@@ -75,7 +75,8 @@ def _extrinsic(weighted):
     what = "sum psi |tau|" if weighted else "sum psi"
     lines = ["", "", "@numba.njit(cache=True, nogil=True)",
              f"def {name}(fpf, shape, i, h, cross2, acc0, acc1):",
-             f'    """{what} into acc0, sum |sigma|/4 into acc1. cross2[f] is |u_b x v_b|^2 of face',
+             f'    """{what} into acc0, sum |sigma|/4 into acc1. cross2[f] is |u_b x v_b|^2 of '
+             'face',
              '    f\'s base edges (spacing folded in)."""']
     _offsets(lines, 4)
     lines.append("    hx, hy, hz = h[0], h[1], h[2]")
@@ -135,7 +136,8 @@ def _extrinsic(weighted):
 def _laplace_beltrami():
     lines = ["", "", "@numba.njit(cache=True, nogil=True)",
              "def laplace_beltrami_slab(fpf, shape, i, h, acc):",
-             '    """acc[1]: sum |sigma|/4; acc[2:6]: sum |sigma| grad(phi_p); acc[6:9]: the x, y, z',
+             '    """acc[1]: sum |sigma|/4; acc[2:6]: sum |sigma| grad(phi_p); acc[6:9]: the x, '
+             'y, z',
              '    parts of sum |sigma| nu (see `_grid_kernels.grid_kernel`)."""']
     _offsets(lines, 4)
     lines += ["    for j in range(shape[1] - 1):", "        for k in range(shape[2] - 1):",

@@ -50,8 +50,9 @@ def vertex_curvature(
     ------
     ValueError
         Wrong shapes, indices out of range, an empty mesh, a face shared by three
-        or more simplices, a pinched vertex (its star in several pieces), zero-volume simplices, inconsistent orientation (for the oriented
-        operators), or an operator undefined for this n.
+        or more simplices, a pinched vertex (its star in several pieces), zero-volume
+        simplices, inconsistent orientation (for the oriented operators), or an
+        operator undefined for this n.
 
     Examples
     --------

@@ -39,7 +39,8 @@ def regular_file_size(path: Path) -> int:
         raise VolumeFileError(f"{path}: cannot be read ({err.strerror})") from None
     kind = stat.S_IFMT(info.st_mode)
     if kind != stat.S_IFREG:
-        raise VolumeFileError(f"{path}: is {_KINDS.get(kind, 'not a regular file')}, not a volume file")
+        raise VolumeFileError(f"{path}: is {_KINDS.get(kind, 'not a regular file')}, not a volume "
+                              "file")
     return info.st_size
 
 
@@ -65,8 +66,8 @@ def confined(header: Path, name: str, field: str, allow_external: bool) -> Path:
     Raises
     ------
     VolumeFileError
-        The file does not exist, or the name is empty, absolute or climbs out of the header's folder (``..``,
-        a symbolic link), unless `allow_external` is true.
+        The file does not exist, or the name is empty, absolute or climbs out of the
+        header's folder (``..``, a symbolic link), unless `allow_external` is true.
     """
     name = name.strip()
     if not name:
@@ -77,7 +78,8 @@ def confined(header: Path, name: str, field: str, allow_external: bool) -> Path:
     try:
         exists = target.exists()
     except OSError as err:
-        raise VolumeFileError(f"{header}: its {field!r} {name!r} cannot be read ({err.strerror})") from None
+        raise VolumeFileError(f"{header}: its {field!r} {name!r} cannot be read "
+                              f"({err.strerror})") from None
     if not exists:
         raise VolumeFileError(f"{header}: its {field!r} {name!r} does not exist ({target})")
     if allow_external:
@@ -86,7 +88,8 @@ def confined(header: Path, name: str, field: str, allow_external: bool) -> Path:
     try:
         inside = target.resolve().is_relative_to(base)
     except (OSError, RuntimeError) as err:  # too long, a symlink loop
-        raise VolumeFileError(f"{header}: its {field!r} {name!r} cannot be resolved ({err})") from None
+        raise VolumeFileError(f"{header}: its {field!r} {name!r} cannot be resolved "
+                              f"({err})") from None
     if not inside:
         raise VolumeFileError(
             f"{header}: its {field!r} {name!r} lies outside the header's folder {base}; "
@@ -117,12 +120,14 @@ def read_exact(path: Path, offset: int, shape, dtype: np.dtype, mapped: bool = F
             f"(+{offset} header bytes), found {size - offset}"
         )
     if mapped:
-        return np.memmap(path, dtype=dtype, mode="r", offset=offset, shape=(expected // dtype.itemsize,))
+        return np.memmap(path, dtype=dtype, mode="r", offset=offset,
+                         shape=(expected // dtype.itemsize,))
     with open(path, "rb") as handle:
         handle.seek(offset)
         flat = np.fromfile(handle, dtype=dtype, count=expected // dtype.itemsize)
     if flat.size * dtype.itemsize != expected:  # the file shrank while we read it
-        raise VolumeFileError(f"{path}: ended after {flat.size * dtype.itemsize} of {expected} bytes")
+        raise VolumeFileError(f"{path}: ended after {flat.size * dtype.itemsize} of {expected} "
+                              "bytes")
     return flat
 
 

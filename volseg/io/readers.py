@@ -257,7 +257,8 @@ def _read_nifti(path: Path, shape, dtype, byte_order, allow_external, mapped=Fal
     except VolumeFileError:
         raise
     except Exception as err:  # nibabel's ImageFileError, HeaderDataError, EOFError, zlib ...
-        raise VolumeFileError(f"{path}: not a readable NIfTI header ({type(err).__name__}: {err})") from None
+        raise VolumeFileError(f"{path}: not a readable NIfTI header ({type(err).__name__}: "
+                              f"{err})") from None
     if offset < int(header["sizeof_hdr"]):
         raise VolumeFileError(f"{path}: the 'vox_offset' field ({offset}) puts the data inside "
                               f"the {int(header['sizeof_hdr'])}-byte header")
@@ -268,14 +269,16 @@ def _read_nifti(path: Path, shape, dtype, byte_order, allow_external, mapped=Fal
         image = type(image).from_bytes(payload)
     elif regular_file_size(path) < expected:
         raise VolumeFileError(f"{path}: expected {expected} bytes for shape {data_shape} of "
-                              f"{dt.name} (+{offset} header bytes), found {regular_file_size(path)}")
+                              f"{dt.name} (+{offset} header bytes), found "
+                              f"{regular_file_size(path)}")
     try:
         data = np.asanyarray(image.dataobj)
         sform, sform_code = image.header.get_sform(coded=True)
         qform, qform_code = image.header.get_qform(coded=True)
         affine = image.affine
     except Exception as err:
-        raise VolumeFileError(f"{path}: unreadable NIfTI data ({type(err).__name__}: {err})") from None
+        raise VolumeFileError(f"{path}: unreadable NIfTI data ({type(err).__name__}: "
+                              f"{err})") from None
     same = qform is None or np.allclose(qform, affine, atol=1e-6)
     try:
         frame = Frame(affine, sform_code=int(sform_code), qform_code=int(qform_code),
@@ -298,7 +301,8 @@ def _read_npy(path: Path, shape, dtype, byte_order, allow_external, mapped=False
                 data_shape, fortran, dt = fmt.read_array_header_2_0(handle)
             offset = handle.tell()
     except Exception as err:  # noqa: BLE001 - a header is untrusted text: any failure is the file's
-        raise VolumeFileError(f"{path}: not a plain .npy array ({type(err).__name__}: {err})") from None
+        raise VolumeFileError(f"{path}: not a plain .npy array ({type(err).__name__}: "
+                              f"{err})") from None
     if dt.hasobject or dt.kind not in "biuf":
         raise VolumeFileError(f"{path}: voxel type {dt} is not a real number type")
     flat = read_exact(path, offset, data_shape, dt, mapped=mapped)
@@ -414,7 +418,8 @@ def read_volume(path, *, shape=None, dtype=None, byte_order=None,
         data, frame, short, source, files = _reader(path)(
             path, shape, dtype, byte_order, allow_external_data, mapped=chunks is not None)
     except MemoryError:
-        raise VolumeFileError(f"{path}: the declared size does not fit in this machine's memory") from None
+        raise VolumeFileError(f"{path}: the declared size does not fit in this machine's "
+                              "memory") from None
     if chunks is not None:
         data = _lazy(path, data, chunks)
     else:

@@ -74,7 +74,8 @@ def _zarr_series(path: Path) -> Series:
     try:
         array = zarr.open(str(path), mode="r")
     except Exception as err:  # noqa: BLE001 - any failure to open is the store's
-        raise VolumeFileError(f"{path}: not a readable Zarr store ({type(err).__name__}: {err})") from None
+        raise VolumeFileError(f"{path}: not a readable Zarr store ({type(err).__name__}: "
+                              f"{err})") from None
     if not hasattr(array, "nchunks") or array.ndim != 4:
         raise VolumeFileError(f"{path}: the series must be one 4-D Zarr array (x, y, z, t), got "
                               f"{'a group' if not hasattr(array, 'ndim') else f'{array.ndim}-D'}")
@@ -84,7 +85,8 @@ def _zarr_series(path: Path) -> Series:
     try:
         data = array[...]
     except Exception as err:  # noqa: BLE001 - codec errors have no common type
-        raise VolumeFileError(f"{path}: a chunk is unreadable ({type(err).__name__}: {err})") from None
+        raise VolumeFileError(f"{path}: a chunk is unreadable ({type(err).__name__}: "
+                              f"{err})") from None
     data = _validate.volume_array(data, source=path, error=VolumeFileError, ndim=4)
     spacing = tuple(dict(array.attrs).get("volseg", {}).get("spacing", (1.0, 1.0, 1.0)))[:3]
     name = path.name[:-5] if path.name.endswith(".zarr") else path.name
@@ -133,7 +135,8 @@ def read_series(inputs, *, allow_external_data: bool = False) -> Series:
         try:
             data, frame, name, _, files = reader(path, None, None, None, allow_external_data)
         except MemoryError:
-            raise VolumeFileError(f"{path}: the declared size does not fit in this machine's memory") from None
+            raise VolumeFileError(f"{path}: the declared size does not fit in this machine's "
+                                  "memory") from None
         data = _validate.volume_array(data, source=path, error=VolumeFileError, ndim=4)
         frame = frame or Frame.from_spacing((1.0, 1.0, 1.0))
         return Series(data, tuple(frame.spacing), name, tuple(files), frame)

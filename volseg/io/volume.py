@@ -50,7 +50,8 @@ class Frame:
         object.__setattr__(self, "affine", affine)
         for name in ("sform_code", "qform_code"):
             if int(getattr(self, name)) not in _CODES:
-                raise ValueError(f"`{name}` must be a NIfTI xform code 0..5, got {getattr(self, name)}")
+                raise ValueError(f"`{name}` must be a NIfTI xform code 0..5, got "
+                                 f"{getattr(self, name)}")
             object.__setattr__(self, name, int(getattr(self, name)))
 
     @classmethod
@@ -94,7 +95,8 @@ class Volume:
         if frame is None:
             frame = Frame.from_spacing((1.0, 1.0, 1.0) if spacing is None else spacing)
         elif spacing is not None and not np.allclose(frame.spacing, spacing):
-            raise ValueError(f"`spacing` {tuple(spacing)} disagrees with the frame's {frame.spacing}")
+            raise ValueError(f"`spacing` {tuple(spacing)} disagrees with the frame's "
+                             f"{frame.spacing}")
         self.data = data
         self.frame = frame
         self.name = name

@@ -14,7 +14,8 @@ from .volume import Frame
 
 __all__ = ["write_volume", "atomic_path"]
 
-_NRRD_NAMES = {code: name for name, code in NRRD_TYPES.items() if "_" not in name and " " not in name}
+_NRRD_NAMES = {code: name for name, code in NRRD_TYPES.items()
+               if "_" not in name and " " not in name}
 
 
 #: A temporary file beside a path (kept under this name for callers of volseg.io).

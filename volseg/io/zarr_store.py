@@ -48,7 +48,8 @@ def _ome_level0(group, path):
                 factors = [float(f) for f in transform["scale"]]
         array = group[level["path"]]
     except (KeyError, IndexError, TypeError, ValueError) as err:
-        raise VolumeFileError(f"{path}: malformed OME-Zarr 'multiscales' metadata ({err})") from None
+        raise VolumeFileError(f"{path}: malformed OME-Zarr 'multiscales' metadata "
+                              f"({err})") from None
     if not axes:
         axes = ["t", "c", "z", "y", "x"][-array.ndim:]
     if len(axes) != array.ndim or len(factors) != array.ndim:
@@ -66,7 +67,8 @@ def read_zarr(path) -> Volume:
     try:
         node = zarr.open(str(path), mode="r")
     except Exception as err:  # noqa: BLE001 - any failure to open is the store's
-        raise VolumeFileError(f"{path}: not a readable Zarr store ({type(err).__name__}: {err})") from None
+        raise VolumeFileError(f"{path}: not a readable Zarr store ({type(err).__name__}: "
+                              f"{err})") from None
     frame = None
     if isinstance(node, zarr.Group):
         array, axes, factors = _ome_level0(node, path)
@@ -83,7 +85,8 @@ def read_zarr(path) -> Volume:
         attrs = dict(array.attrs).get("volseg", {})
         order = None
         if attrs.get("axes", "xyz") != "xyz":
-            raise VolumeFileError(f"{path}: volseg axes attribute {attrs.get('axes')!r}; expected 'xyz'")
+            raise VolumeFileError(f"{path}: volseg axes attribute {attrs.get('axes')!r}; expected "
+                                  "'xyz'")
         if "affine" in attrs:
             try:
                 frame = Frame(np.asarray(attrs["affine"], dtype=np.float64))
@@ -126,7 +129,8 @@ class _Checked:
         try:
             return self.array[key]
         except Exception as err:  # noqa: BLE001 - codec errors have no common type
-            where = ", ".join(f"{k.start}:{k.stop}" if isinstance(k, slice) else str(k) for k in key)
+            where = ", ".join(f"{k.start}:{k.stop}" if isinstance(k, slice) else str(k)
+                              for k in key)
             raise VolumeFileError(f"{self.path}: the chunk at [{where}] is unreadable "
                                   f"({type(err).__name__}: {err})") from None
 
@@ -137,7 +141,8 @@ def write_zarr(path, data, *, frame: Frame | None = None, chunks=None, compute=N
     import dask.array as da
     import zarr
 
-    lazy = data if isinstance(data, da.Array) else da.from_array(np.asarray(data), chunks=chunks or "auto")
+    lazy = (data if isinstance(data, da.Array)
+            else da.from_array(np.asarray(data), chunks=chunks or "auto"))
     # Regular chunks, equal to the store's: each block then writes whole store chunks
     # of its own (no two blocks share one, so no lock is needed).
     lazy = lazy.rechunk(chunks if chunks is not None else tuple(c[0] for c in lazy.chunks))

@@ -189,7 +189,8 @@ def _per_block(function, *arrays, **kwargs):
         out[(0,) * blocks[0].ndim] = function(*blocks, block_id=block_id, **kwargs)
         return out
     return da.map_blocks(wrapped, *arrays, dtype=object,
-                         chunks=tuple((1,) * len(c) for c in arrays[0].chunks), meta=np.empty((0,) * 3, object))
+                         chunks=tuple((1,) * len(c) for c in arrays[0].chunks),
+                         meta=np.empty((0,) * 3, object))
 
 
 def _gather(blocks, compute, stage) -> list:
@@ -398,7 +399,8 @@ def _union_find(forests: list, n_maxima: int, index_type) -> tuple:
     edge_v = edge_v[order]
     edge_f = edge_f[order]
     del order
-    out = [np.empty(max(n_maxima - 1, 0), dtype=t) for t in (np.int32, np.int32, np.int32, np.int64)]
+    out = [np.empty(max(n_maxima - 1, 0), dtype=t)
+           for t in (np.int32, np.int32, np.int32, np.int64)]
     # Kruskal records each event's edge (its index in place of a saddle): the events'
     # saddles and their values are then two gathers.
     edge = np.arange(len(edge_a), dtype=index_type if len(edge_a) < 2**31 - 1 else np.int64)

@@ -60,7 +60,8 @@ def _merge_events(graph: _Neighbourhood, cell, n_maxima,
     sorted_edges = [np.empty_like(edge_a), np.empty_like(edge_b), np.empty_like(edge_v)]
     kernels.gather(order, edge_a, edge_b, edge_v, *sorted_edges)
     del order, edge_a, edge_b, edge_v
-    out = [np.empty(max(n_maxima - 1, 0), dtype=t) for t in (np.int32, np.int32, np.int32, np.int64)]
+    out = [np.empty(max(n_maxima - 1, 0), dtype=t)
+           for t in (np.int32, np.int32, np.int32, np.int64)]
     n_events = kernels.kruskal(*sorted_edges, n_maxima, *out)
     phases.done("union-find")
     return _MergeEvents(*(a[:n_events].copy() for a in out))

@@ -36,9 +36,11 @@ def check_cut(min_persistence=None, n_regions=None) -> tuple:
         try:
             value = float(min_persistence)
         except (TypeError, ValueError):
-            raise ValueError(f"`min_persistence` must be a number, got {min_persistence!r}") from None
+            raise ValueError("`min_persistence` must be a number, got "
+                             f"{min_persistence!r}") from None
         if not value >= 0:  # NaN too
-            raise ValueError(f"`min_persistence` must be a non-negative number, got {min_persistence!r}")
+            raise ValueError("`min_persistence` must be a non-negative number, got "
+                             f"{min_persistence!r}")
         min_persistence = value
     return min_persistence, n_regions
 
@@ -227,8 +229,10 @@ class MorseHierarchy:
             for step in grid_offsets(len(self.shape), self._connectivity):
                 if tuple(step) <= (0,) * len(step):
                     continue
-                src = tuple(slice(max(-s, 0), n - max(s, 0)) for s, n in zip(step, self.shape, strict=True))
-                dst = tuple(slice(max(s, 0), n - max(-s, 0)) for s, n in zip(step, self.shape, strict=True))
+                sizes = zip(step, self.shape, strict=True)
+                src = tuple(slice(max(-s, 0), n - max(s, 0)) for s, n in sizes)
+                sizes = zip(step, self.shape, strict=True)
+                dst = tuple(slice(max(s, 0), n - max(-s, 0)) for s, n in sizes)
                 a, b = labels[src].ravel(), labels[dst].ravel()
                 cross = a != b
                 pairs.append(np.sort(np.stack([a[cross], b[cross]], 1), axis=1))

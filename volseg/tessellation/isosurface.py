@@ -158,7 +158,8 @@ def _check_values(field) -> NDArray[np.float64]:
     array = np.ascontiguousarray(array, dtype=np.float64)
     if not np.isfinite(array).all():
         bad = np.unravel_index(int(np.flatnonzero(~np.isfinite(array))[0]), array.shape)
-        raise ValueError(f"`field` holds NaN or infinite values (first at index {tuple(map(int, bad))})")
+        raise ValueError("`field` holds NaN or infinite values (first at index "
+                         f"{tuple(map(int, bad))})")
     return array
 
 
@@ -399,7 +400,8 @@ def level_set(vertices: ArrayLike, simplices: ArrayLike, field: ArrayLike, level
     vertices, simplices = check_mesh(vertices, simplices, codimension=None)
     values, level = _check_values(field).ravel(), _check_level(level)
     if np.ndim(field) != 1 or len(values) != len(vertices):
-        raise ValueError(f"`field` must have one value per vertex ({len(vertices)}), got {len(values)}")
+        raise ValueError(f"`field` must have one value per vertex ({len(vertices)}), got "
+                         f"{len(values)}")
     k = simplices.shape[1]
     if oriented and vertices.shape[1] != k - 1:
         raise ValueError(f"an oriented level set needs full-dimensional simplices "
@@ -407,6 +409,8 @@ def level_set(vertices: ArrayLike, simplices: ArrayLike, field: ArrayLike, level
     ordered = np.sort(simplices, axis=1)
     lower, upper = _cut(ordered, values, level, (lambda ids: vertices[ids]) if oriented else None)
     edges, out, fraction = _weld(lower, upper, values, level)
-    points = vertices[edges[:, 0]] + fraction[:, None] * (vertices[edges[:, 1]] - vertices[edges[:, 0]])
-    faces = boundary_faces(out) if len(out) and k > 2 else np.zeros((0, max(k - 2, 0)), dtype=np.intp)
+    start, end = vertices[edges[:, 0]], vertices[edges[:, 1]]
+    points = start + fraction[:, None] * (end - start)
+    faces = (boundary_faces(out) if len(out) and k > 2
+             else np.zeros((0, max(k - 2, 0)), dtype=np.intp))
     return Isosurface(points, out, faces, edges, fraction)

@@ -98,9 +98,11 @@ def relax_isosurface(surface: Isosurface, field: ArrayLike, level: float, *, spa
     spacing = _axis_vector(spacing, d, "spacing", 1.0, positive=True)
     origin = _axis_vector(origin, d, "origin", 0.0, positive=False)
     if int(iterations) < 0 or not 0 < float(step) <= 1:
-        raise ValueError(f"`iterations` must be >= 0 and `step` in (0, 1], got {iterations}, {step}")
+        raise ValueError(f"`iterations` must be >= 0 and `step` in (0, 1], got {iterations}, "
+                         f"{step}")
     if surface.vertices.shape[1] != d:
-        raise ValueError(f"the surface is in R^{surface.vertices.shape[1]} but the field has {d} axes")
+        raise ValueError(f"the surface is in R^{surface.vertices.shape[1]} but the field has {d} "
+                         "axes")
     points = surface.vertices.copy()
     simplices = surface.simplices
     if not len(simplices):
@@ -166,7 +168,8 @@ def dihedral_angles(vertices: ArrayLike, simplices: ArrayLike) -> NDArray[np.flo
         out = []
         for i in range(3):
             a, b = local[:, (i + 1) % 3] - local[:, i], local[:, (i + 2) % 3] - local[:, i]
-            cos = np.einsum("ij,ij->i", a, b) / (np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1))
+            lengths = np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1)
+            cos = np.einsum("ij,ij->i", a, b) / lengths
             out.append(np.degrees(np.arccos(np.clip(cos, -1, 1))))
         return np.stack(out, axis=1)
     raise ValueError(f"dihedral angles are defined here for triangles and tetrahedra, got n = {n}")
