@@ -92,14 +92,16 @@ def test_quick_pipeline_writes_tables_figures_and_the_grid_reduction(tmp_path):
     assert pipeline.main(["--out", str(tmp_path), "--quick", "-q"]) == 0
     for name in ["errors.csv", "summary.csv", "fig2.png", "fig3.png", "reduction.txt"]:
         assert (tmp_path / name).stat().st_size > 0
-    rows = list(csv.DictReader(open(tmp_path / "errors.csv")))
+    with open(tmp_path / "errors.csv") as file:
+        rows = list(csv.DictReader(file))
     kinds = {(r["experiment"], r["tessellation"]) for r in rows}
     assert kinds == {("resolution", "grid"), ("resolution", "irregular"),
                      ("resolution", "diamond"), ("valence", "irregular"),
                      ("value_noise", "grid"), ("normal_noise", "grid")}
     assert {r["function"] for r in rows} == set(FUNCTIONS)
     assert {r["operator"] for r in rows} == {"weighted", "laplace_beltrami"}
-    summary = list(csv.DictReader(open(tmp_path / "summary.csv")))
+    with open(tmp_path / "summary.csv") as file:
+        summary = list(csv.DictReader(file))
     grid = {(int(s["resolution"]), s["operator"]): float(s["error"]) for s in summary
             if s["experiment"] == "resolution" and s["tessellation"] == "grid"}
     # The paper's claim on uniform grids holds here at every resolution.

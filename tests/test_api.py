@@ -2,7 +2,10 @@
 
 import importlib
 import pkgutil
+import sys
 from pathlib import Path
+
+import pytest
 
 import volseg
 
@@ -19,9 +22,19 @@ def test_star_import_works():
     assert "segment_volume" in namespace and "descending_complex" in namespace
 
 
+#: Deprecated aliases of moved modules: they import, with a DeprecationWarning.
+MOVED = {"volseg.preview", "volseg.engine", "volseg.spacetime_outputs"}
+
+
 def test_every_module_of_the_package_imports():
     for module in pkgutil.walk_packages(volseg.__path__, "volseg."):
-        if module.name != "volseg.__main__":  # runs the command line
+        if module.name == "volseg.__main__":  # runs the command line
+            continue
+        if module.name in MOVED:
+            sys.modules.pop(module.name, None)
+            with pytest.warns(DeprecationWarning, match="is deprecated"):
+                importlib.import_module(module.name)
+        else:
             importlib.import_module(module.name)
 
 

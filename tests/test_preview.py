@@ -19,17 +19,36 @@ def test_preview_is_a_png_with_colour_only_inside_the_labels(tmp_path):
     persistence = (np.array([0.5, 0.1, 0.01]), 1, 0.05)
     path = write_preview(tmp_path / "p.png", volume, curvature, labels, title="case",
                          persistence=persistence)
-    image = np.asarray(Image.open(path).convert("RGB"))
+    with Image.open(path) as png:
+        image = np.asarray(png.convert("RGB"))
     assert image.shape[0] > 300 and image.shape[1] > 600
-    assert len(np.unique(image.reshape(-1, 3), axis=0)) > 50  # not blank
+    # The regions panel of the first row (x = mid slice), as written: grey exactly
+    # where the label is 0, the region's colour blended in where it is not.
+    from volseg.outputs import preview
+
+    mid = volume.shape[0] // 2
+    lo, hi = volume.min(), volume.max()
+    panel = preview._fit(preview.overlay(volume[mid].T, labels[mid].T, lo, hi))
+    fitted_labels = preview._fit(np.repeat(labels[mid].T[..., None], 3, axis=2))[..., 0]
+    x0, y0 = preview._LEFT + 2 * (preview._BOX + preview._GAP), preview._TOP
+    # (Left of the legend box, drawn over the panel's top right corner.)
+    clear = preview._BOX - 112 - 6
+    panel, fitted_labels = panel[:, :clear], fitted_labels[:, :clear]
+    written = image[y0:y0 + panel.shape[0], x0:x0 + panel.shape[1]].astype(int)
+    assert np.array_equal(written, panel)
+    assert (fitted_labels == 0).any() and (fitted_labels > 0).any()
+    grey = (written.max(axis=2) == written.min(axis=2))
+    assert grey[fitted_labels == 0].all()
+    assert not grey[fitted_labels > 0].any()
 
 
 def test_label_zero_is_not_coloured(tmp_path):
     volume, curvature, labels = _case()
     empty = write_preview(tmp_path / "a.png", volume, curvature, np.zeros_like(labels))
     full = write_preview(tmp_path / "b.png", volume, curvature, labels)
-    a = np.asarray(Image.open(empty).convert("RGB")).astype(int)
-    b = np.asarray(Image.open(full).convert("RGB")).astype(int)
+    with Image.open(empty) as one, Image.open(full) as two:
+        a = np.asarray(one.convert("RGB")).astype(int)
+        b = np.asarray(two.convert("RGB")).astype(int)
     assert a.shape == b.shape and (a != b).any()  # the regions change the picture
     saturation = lambda im: (im.max(axis=2) - im.min(axis=2)).mean()  # noqa: E731
     assert saturation(b) > saturation(a)
@@ -37,8 +56,8 @@ def test_label_zero_is_not_coloured(tmp_path):
 
 def test_persistence_plot_alone(tmp_path):
     path = write_persistence_plot(tmp_path / "curve.png", np.geomspace(1, 1e-3, 40), 1, 0.01, 20)
-    image = Image.open(path)
-    assert image.format == "PNG" and image.size[0] > 200
+    with Image.open(path) as image:
+        assert image.format == "PNG" and image.size[0] > 200
 
 
 def test_persistence_curve_drawn_in_blocks_is_the_same_image(monkeypatch):
@@ -69,8 +88,10 @@ def test_a_lazy_preview_given_its_range_and_labels_is_the_same_image(tmp_path):
                                                  "n_labels": int(labels.max())})):
         path = write_preview(tmp_path / f"{name}.png", *arrays, title="case",
                              persistence=persistence, **known)
-        images.append(np.asarray(Image.open(path).convert("RGB")))
+        with Image.open(path) as png:
+            images.append(np.asarray(png.convert("RGB")))
     assert all(np.array_equal(image, images[0]) for image in images[1:])
     other = write_preview(tmp_path / "other.png", *lazy, title="case", persistence=persistence,
                           value_range=(volume.min(), 2 * volume.max()), n_labels=2)
-    assert not np.array_equal(np.asarray(Image.open(other).convert("RGB")), images[0])
+    with Image.open(other) as png:
+        assert not np.array_equal(np.asarray(png.convert("RGB")), images[0])
