@@ -88,6 +88,7 @@ def test_both_operators_converge_at_second_order_on_grids(operator):
     assert 1.8 < slope < 2.3
 
 
+@pytest.mark.slow
 def test_quick_pipeline_writes_tables_figures_and_the_grid_reduction(tmp_path):
     assert pipeline.main(["--out", str(tmp_path), "--quick", "-q"]) == 0
     for name in ["errors.csv", "summary.csv", "fig2.png", "fig3.png", "reduction.txt"]:

@@ -244,6 +244,7 @@ def _segment_process(source, out):
                             stderr=subprocess.PIPE, text=True)
 
 
+@pytest.mark.slow
 def test_sigterm_cleans_staging_and_releases_the_lock(tmp_path):
     source = _raw(tmp_path / "t_96x96x96_uint8.raw", _blob((96, 96, 96)))
     out = tmp_path / "out"
@@ -259,6 +260,7 @@ def test_sigterm_cleans_staging_and_releases_the_lock(tmp_path):
     assert list(out.iterdir()) == []  # no staging, no lock, no half set
 
 
+@pytest.mark.slow
 def test_sigkill_at_random_moments_leaves_no_set_or_one_complete_set(tmp_path):
     from volseg.io import recover
 

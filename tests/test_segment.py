@@ -80,23 +80,6 @@ def test_each_mask_component_gets_a_region_and_counts_are_foreground_regions():
     assert segment_volume(volume, mask="nonzero", n_regions=4).n_regions == 4
 
 
-def test_mask_rules():
-    from volseg.masks import foreground_mask
-
-    volume = np.arange(64, dtype=float).reshape(4, 4, 4)
-    assert foreground_mask(volume, "value>=60").voxels == 4
-    assert foreground_mask(volume, "value < 3").voxels == 3
-    assert foreground_mask(volume, "none").mask is None
-    assert foreground_mask(volume, "auto").used == "none"  # no plateau
-    assert foreground_mask(volume, "otsu").used.startswith("value>")
-    with pytest.raises(ValueError, match="unknown `mask` rule 'bright'"):
-        foreground_mask(volume, "bright")
-    with pytest.raises(ValueError, match="selects no voxel"):
-        foreground_mask(volume, "value>100")
-    with pytest.raises(ValueError, match="boolean array of the volume's shape"):
-        foreground_mask(volume, np.ones((4, 4), bool))
-
-
 def test_smooth_zero_is_bit_identical_and_smoothing_removes_the_checkerboard():
     data = demo_volume(32)
     plain = segment_volume(data)

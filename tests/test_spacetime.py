@@ -177,6 +177,7 @@ def test_cli_isosurface_refuses_a_3d_file(tmp_path, capsys):
     assert "must be 4-D" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_demo_time_follows_the_two_blobs(tmp_path, capsys):
     assert main(["demo", "--time", "-o", str(tmp_path), "-q"]) == 0
     assert "two blobs merging" in capsys.readouterr().out

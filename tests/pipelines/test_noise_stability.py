@@ -71,6 +71,7 @@ def test_zero_noise_gives_similarity_one_and_ratio_one():
         assert noisy["similarity"] < 1.0
 
 
+@pytest.mark.slow
 def test_small_run_on_a_local_cluster_then_a_rerun_does_no_work(tiny, tmp_path, capsys):
     out = tmp_path / "run"
     argv = ["--out", str(out), "--datasets", *tiny, "--operators", "weighted",
@@ -112,6 +113,7 @@ def test_small_run_on_a_local_cluster_then_a_rerun_does_no_work(tiny, tmp_path, 
     assert (out / ns.DB_NAME).read_bytes() == before
 
 
+@pytest.mark.slow
 def test_a_failing_task_is_recorded_and_the_others_finish(tmp_path, capfd):
     good = ("good", _volume(3), "g" * 64)
     flat = ("flat", np.zeros((16, 16), dtype=np.uint8), "f" * 64)  # 2-D: segmenting fails
@@ -138,6 +140,7 @@ def _count_done(db):
         return 0
 
 
+@pytest.mark.slow
 def test_killed_run_resumes_and_every_task_is_there_once(tiny, tmp_path):
     out = tmp_path / "killed"
     argv = [sys.executable, "-m", "pipelines.noise_stability", "--out", str(out),
@@ -192,6 +195,7 @@ def test_an_existing_scheduler_is_used_and_left_running(tmp_path):
             assert len(client.scheduler_info()["workers"]) == 1
 
 
+@pytest.mark.slow
 def test_region_count_cut_keeps_the_count_and_is_keyed_apart(tmp_path, capsys):
     data = ("delta", _volume(7, n=20), "d" * 64)
     for cut in ["threshold", "regions"]:
@@ -219,6 +223,7 @@ def test_a_results_file_with_other_keys_is_refused(tmp_path, capsys):
     assert "another version" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_unreachable_or_malformed_scheduler_is_one_line_exit_2(tiny, tmp_path, capsys):
     for address, message in [("not-an-address", "missing port number"),
                              ("tcp://127.0.0.1:9", "cannot reach")]:

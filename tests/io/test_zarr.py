@@ -13,7 +13,7 @@ import zarr
 from volseg.cli import main
 from volseg.io import Frame, VolumeFileError, read_volume, write_zarr
 
-from .conftest import smooth_random_field
+from ..conftest import smooth_random_field
 
 
 @pytest.fixture(autouse=True)

@@ -12,11 +12,10 @@ import pytest
 import zarr
 
 from volseg.blockwise import engine as engine_module
-from volseg.blockwise._resume import WorkFolder
 from volseg.cli import main
 from volseg.io import read_volume
 
-from .conftest import smooth_random_field
+from ..conftest import smooth_random_field
 
 
 @pytest.fixture
@@ -43,6 +42,7 @@ def test_mapped_block_reads_equal_whole_reads(tmp_path, volume):
         assert len(pickle.dumps(lazy)) < expected.nbytes / 2
 
 
+@pytest.mark.slow
 def test_bad_engine_arguments_and_an_unreachable_scheduler(tmp_path, volume, capsys, monkeypatch):
     np.save(tmp_path / "vol.npy", volume)
     monkeypatch.setattr(engine_module, "CONNECT_TIMEOUT", 1.0)
@@ -58,43 +58,6 @@ def test_bad_engine_arguments_and_an_unreachable_scheduler(tmp_path, volume, cap
         assert _visible(out) == [] and not (out / ".vol.volseg-work").exists()
     # The failed Client does not stay Dask's default scheduler.
     assert dask.config.get("scheduler", None) in (None, "synchronous", "sync")
-
-
-def test_work_folder_keeps_blocks_for_the_same_key_only(tmp_path):
-    calls = []
-
-    def block(x, block_id=None):
-        calls.append(block_id)
-        return x * 2, x.sum()
-
-    work = WorkFolder(tmp_path / "w", {"input": "abc", "scale": 1.0})
-    assert not work.resumed
-    first = work.wrap("stage", block)(np.arange(3), block_id=(0, 1, 2))
-    again = WorkFolder(tmp_path / "w", {"input": "abc", "scale": 1.0})
-    second = again.wrap("stage", block)(np.arange(3), block_id=(0, 1, 2))
-    assert again.resumed and again.finished("stage") == 1 and len(calls) == 1
-    assert all(np.array_equal(a, b) for a, b in zip(first, second, strict=True))
-    other = WorkFolder(tmp_path / "w", {"input": "abc", "scale": 2.0})   # another run
-    assert not other.resumed and other.finished("stage") == 0
-
-
-def test_a_block_killed_while_written_does_not_count_as_finished(tmp_path, monkeypatch):
-    # Killed after the temporary file is written, before its rename: no block looks
-    # finished (the count decides whether a stored stage is computed again). A kill
-    # runs no clean-up: the temporary's removal is disabled too.
-    import volseg._atomic as atomic
-
-    work = WorkFolder(tmp_path / "w", {"input": "abc"})
-
-    def killed(*args):
-        raise KeyboardInterrupt
-
-    monkeypatch.setattr(atomic.os, "replace", killed)
-    monkeypatch.setattr(atomic.os, "unlink", lambda path: None)
-    with pytest.raises(KeyboardInterrupt):
-        work.wrap("stage", lambda x, block_id=None: x * 2)(np.arange(3), block_id=(0, 0, 0))
-    assert len(list((work.folder / "stage").iterdir())) == 1       # the leftover
-    assert work.finished("stage") == 0
 
 
 def _whole_and_interrupted(tmp_path, volume, monkeypatch, stage_function):
@@ -125,6 +88,7 @@ def _whole_and_interrupted(tmp_path, volume, monkeypatch, stage_function):
     return argv, expected, out
 
 
+@pytest.mark.slow
 def test_a_run_killed_in_the_cells_pass_resumes_from_the_kept_path_ends(tmp_path, volume,
                                                                         monkeypatch):
     from volseg.morse import _blocks as _morse_blocks
@@ -140,6 +104,7 @@ def test_a_run_killed_in_the_cells_pass_resumes_from_the_kept_path_ends(tmp_path
     assert np.array_equal(zarr.open(str(out / "vol_labels.zarr"), mode="r")[:], expected)
 
 
+@pytest.mark.slow
 def test_a_killed_run_resumes_from_its_finished_blocks(tmp_path, volume, capsys, monkeypatch):
     from volseg.curvature import _grid_blocks
 
@@ -162,6 +127,7 @@ def test_a_killed_run_resumes_from_its_finished_blocks(tmp_path, volume, capsys,
     assert not work.exists()
 
 
+@pytest.mark.slow
 def test_no_worker_holds_more_than_a_few_blocks_and_the_shells(tmp_path):
     """The scheduler's accounting of the bytes each worker holds, at every transition
     of a whole blockwise run (curvature, Morse, labels) on 27 blocks.

@@ -10,7 +10,7 @@ import pytest
 from volseg import mesh, vertex_curvature
 from volseg.tessellation import isosurface, level_set, quality, relax_isosurface
 
-from .conftest import smooth_random_field
+from ..conftest import smooth_random_field
 
 
 def ball_field(d, n, lo=-1.0, hi=1.0):
@@ -74,6 +74,7 @@ def test_sphere_matches_scikit_image_marching_cubes():
     assert area == pytest.approx(4 * math.pi * 0.49, rel=0.01)
 
 
+@pytest.mark.slow
 def test_three_sphere_in_r4_is_closed_oriented_and_has_the_right_volume():
     r = 0.6
     field, h = ball_field(4, 33)
@@ -88,6 +89,7 @@ def test_three_sphere_in_r4_is_closed_oriented_and_has_the_right_volume():
     assert np.abs(radius - r).max() < h ** 2
 
 
+@pytest.mark.slow
 def test_relaxation_makes_the_three_sphere_curvature_right():
     r = 0.6
     field, h = ball_field(4, 17)

@@ -10,7 +10,7 @@ import pytest
 
 from volseg import descending_complex, grid_curvature, segment_volume
 
-from .conftest import smooth_random_field
+from ..conftest import smooth_random_field
 
 CHUNKINGS = [(27, 40, 50), (2, 46, 33), (23, 17, 11)]
 

@@ -1,0 +1,69 @@
+"""The work folder of a blockwise run (`volseg.blockwise.WorkFolder`): blocks kept for
+the same key only, written atomically, read back as a lazy array, removed whole."""
+
+import numpy as np
+import pytest
+
+from volseg.blockwise import WorkFolder
+
+
+def test_work_folder_keeps_blocks_for_the_same_key_only(tmp_path):
+    calls = []
+
+    def block(x, block_id=None):
+        calls.append(block_id)
+        return x * 2, x.sum()
+
+    work = WorkFolder(tmp_path / "w", {"input": "abc", "scale": 1.0})
+    assert not work.resumed
+    first = work.wrap("stage", block)(np.arange(3), block_id=(0, 1, 2))
+    again = WorkFolder(tmp_path / "w", {"input": "abc", "scale": 1.0})
+    second = again.wrap("stage", block)(np.arange(3), block_id=(0, 1, 2))
+    assert again.resumed and again.finished("stage") == 1 and len(calls) == 1
+    assert all(np.array_equal(a, b) for a, b in zip(first, second, strict=True))
+    other = WorkFolder(tmp_path / "w", {"input": "abc", "scale": 2.0})   # another run
+    assert not other.resumed and other.finished("stage") == 0
+
+
+def test_a_block_killed_while_written_does_not_count_as_finished(tmp_path, monkeypatch):
+    # Killed after the temporary file is written, before its rename: no block looks
+    # finished (the count decides whether a stored stage is computed again). A kill
+    # runs no clean-up: the temporary's removal is disabled too.
+    import volseg._atomic as atomic
+
+    work = WorkFolder(tmp_path / "w", {"input": "abc"})
+
+    def killed(*args):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(atomic.os, "replace", killed)
+    monkeypatch.setattr(atomic.os, "unlink", lambda path: None)
+    with pytest.raises(KeyboardInterrupt):
+        work.wrap("stage", lambda x, block_id=None: x * 2)(np.arange(3), block_id=(0, 0, 0))
+    assert len(list((work.folder / "stage").iterdir())) == 1       # the leftover
+    assert work.finished("stage") == 0
+
+
+def test_stored_blocks_read_back_as_the_array_they_were(tmp_path):
+    import dask.array as da
+
+    data = np.arange(6 * 5 * 4, dtype=np.float64).reshape(6, 5, 4)
+    lazy = da.from_array(data, chunks=(4, 3, 4))
+    work = WorkFolder(tmp_path / "w", {"input": "abc"})
+    stored = lazy.map_blocks(work.wrap("stage", lambda x, block_id=None: x + 1),
+                             dtype=np.float64).compute()
+    assert np.array_equal(stored, data + 1)
+    assert work.finished("stage") == lazy.npartitions
+    again = work.array("stage", lazy.chunks, np.float64)
+    assert np.array_equal(again.compute(), data + 1)
+    work.remove()
+    assert not work.folder.exists()
+
+
+def test_a_block_not_in_the_folder_is_an_error_naming_it(tmp_path):
+    import dask.array as da
+
+    lazy = da.zeros((4, 4, 4), chunks=2)
+    work = WorkFolder(tmp_path / "w", {"input": "abc"})
+    with pytest.raises(RuntimeError, match=r"block \(\d, \d, \d\) was expected in the work folder"):
+        work.array("never", lazy.chunks, np.float64).compute()
