@@ -59,7 +59,7 @@ def bending_angles(
         Radians in (-pi, pi]; positive on a ridge (the hypersurface bends away from
         its normal), negative in a valley, 0 where flat.
     face_volumes : (F,) ndarray of float
-        (n-1)-volume |tau| of each face (1 for n = 1).
+        (n-1)-volume ``|tau|`` of each face (1 for n = 1).
 
     Examples
     --------

@@ -229,7 +229,7 @@ def write_preview(path, volume, curvature, labels, *, title="", persistence=None
     Written to `path` as PNG (the caller handles atomic renaming). Labels are 1..k
     (0, outside a mask, is left uncoloured); region colours cycle through the 20
     tab20 colours; the legend names the first ten. The curvature colour scale is
-    +-(99th percentile of |H| over the slices shown).
+    +-(99th percentile of ``|H|`` over the slices shown).
     `value_range` (the volume's min and max) and `n_labels` (the largest label), when
     the caller knows them, spare a lazy volume's passes over the volume and the labels.
     """
