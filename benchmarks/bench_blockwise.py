@@ -3,7 +3,7 @@
     python benchmarks/bench_blockwise.py --sizes 256 512 [--chunks 128] [--workers 1 2]
                                          [--schedulers threads local]
                                          [--skip-in-memory-above 512] [--folder /tmp/bw]
-                                         [--smooth SIGMA] [--repeat R]
+                                         [--smooth SIGMA] [--repeat R] [--base REV]
 
 For each size N it writes a synthetic smooth uint8 field of N^3 voxels straight to a
 Zarr store, block by block (the field is a sum of sinusoids of the global
@@ -25,6 +25,11 @@ field makes a maximum of the curvature every 15 voxels or so at 1024^3).
 reports each run and the fastest of each case: on a shared machine the same run can
 take 25 % longer ten minutes later, so a ratio of single runs made minutes apart
 measures the machine as much as the code.
+
+``--base REV`` also runs every case with another revision's volseg (a temporary git
+worktree first on the children's PYTHONPATH, run from the bench folder so the
+checkout's own volseg/ is not imported), interleaved with today's, and prints
+today/base per case: the same-run comparison of a refactoring or a speed change.
 """
 
 from __future__ import annotations
@@ -79,7 +84,7 @@ def write_inputs(folder: Path, n: int, chunks: int, npy: bool):
     return zarr_path, npy_path
 
 
-def run(argv, env=None) -> dict:
+def run(argv, env=None, cwd=None) -> dict:
     """Wall time and peak RSS of the process tree of `argv`."""
     import psutil
 
@@ -88,7 +93,7 @@ def run(argv, env=None) -> dict:
     with tempfile.TemporaryFile("w+") as out, tempfile.TemporaryFile("w+") as err:
         start = time.perf_counter()
         process = psutil.Popen(argv, env={**os.environ, **(env or {})}, stdout=out, stderr=err,
-                               text=True)
+                               text=True, cwd=cwd)
         peak = 0
         while process.poll() is None:
             try:
@@ -126,7 +131,17 @@ def main(argv=None) -> int:
                         help="volseg segment --smooth SIGMA for every run (default 0: none)")
     parser.add_argument("--repeat", type=int, default=1,
                         help="runs of every case, interleaved; the fastest is reported")
+    parser.add_argument("--base", help="also run every case with this git revision's volseg")
     args = parser.parse_args(argv)
+    if args.base:
+        from _common import worktree
+
+        with worktree(args.base) as base:
+            return _main(args, {"now": None, "base": str(base)})
+    return _main(args, {"now": None})
+
+
+def _main(args, trees) -> int:
     folder = Path(args.folder)
     folder.mkdir(parents=True, exist_ok=True)
     rows = []
@@ -138,18 +153,22 @@ def main(argv=None) -> int:
         volseg = [sys.executable, "-m", "volseg", "segment", "--regions", "30", "-q", "--force",
                   "--json", "--smooth", str(args.smooth)]
         tag = f"_s{args.smooth:g}" if args.smooth else ""
-        cases = [("in memory", "-", folder / f"mem{n}{tag}",
+        plain = [("in memory", "-", folder / f"mem{n}{tag}",
                   [str(npy_path), "--mask", "none"])] if in_memory else []
-        cases += [(f"blockwise {args.chunks}^3 {scheduler}", workers,
+        plain += [(f"blockwise {args.chunks}^3 {scheduler}", workers,
                    folder / f"blk{n}_{scheduler}_{workers}{tag}",
                    [str(zarr_path), "--scheduler", scheduler, "--workers", str(workers)])
                   for scheduler in args.schedulers for workers in args.workers]
+        cases = [(path if tree == "now" else f"{path} [base]", workers,
+                  out.with_name(out.name + ("" if tree == "now" else "_base")), arguments, tree)
+                 for path, workers, out, arguments in plain for tree in trees]
         best, reference = {}, None
         for repeat in range(args.repeat):
-            for path, workers, out, arguments in cases:
-                result = run([*volseg, *arguments, "-o", str(out)])
+            for path, workers, out, arguments, tree in cases:
+                env = {"PYTHONPATH": trees[tree]} if trees[tree] else None
+                result = run([*volseg, *arguments, "-o", str(out)], env=env, cwd=str(folder))
                 summary = json.loads(result["stdout"])
-                if path == "in memory":
+                if path == "in memory" and tree == "now":
                     reference = np.asarray(labels_of(out, f"field{n}")[...])
                     same = None
                 else:
@@ -180,6 +199,12 @@ def main(argv=None) -> int:
                 if w != least:
                     print(f"{n}^3: {w} workers are {by_workers[least] / by_workers[w]:.2f}x "
                           f"{least} (fastest runs)", flush=True)
+    fastest = {(r["size"], r["path"], r["workers"]): r["seconds"] for r in rows}
+    for (size, path, workers), seconds in fastest.items():
+        base = fastest.get((size, f"{path} [base]", workers))
+        if base:
+            print(f"{size}^3 {path}, workers {workers}: now/base = {seconds / base:.2f} "
+                  f"({seconds:.1f} s / {base:.1f} s, fastest runs)", flush=True)
     smoothed = f", smooth {args.smooth:g}" if args.smooth else ""
     print("\n| size | path | workers | wall s (fastest; every run) | peak GB (all processes) "
           "| maxima | regions | same labels |")

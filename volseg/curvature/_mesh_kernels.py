@@ -6,6 +6,18 @@ import numba
 import numpy as np
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _project_out(vector, basis, count, d):
+    """Subtract from `vector` its components along the first `count` rows of the
+    orthonormal `basis` (one Gram-Schmidt step, in place)."""
+    for q in range(count):
+        dot = 0.0
+        for c in range(d):
+            dot += vector[c] * basis[q, c]
+        for c in range(d):
+            vector[c] -= dot * basis[q, c]
+
+
 @numba.njit(cache=True, nogil=True)
 def bending_kernel(vertices, face_vertices, far_vertex, unit, sa, sb, psi, measure):
     """psi = atan2(-nu_b . u_a, nu_a . nu_b) and the unnormalised |tau| * (n-1)! per face.
@@ -25,12 +37,7 @@ def bending_kernel(vertices, face_vertices, far_vertex, unit, sa, sb, psi, measu
         for k in range(1, n):
             for c in range(d):
                 e[c] = vertices[face_vertices[f, k], c] - vertices[t0, c]
-            for q in range(k - 1):
-                dot = 0.0
-                for c in range(d):
-                    dot += e[c] * basis[q, c]
-                for c in range(d):
-                    e[c] -= dot * basis[q, c]
+            _project_out(e, basis, k - 1, d)
             r = 0.0
             for c in range(d):
                 r += e[c] * e[c]
@@ -40,12 +47,7 @@ def bending_kernel(vertices, face_vertices, far_vertex, unit, sa, sb, psi, measu
                 basis[k - 1, c] = e[c] / r
         for c in range(d):
             u[c] = vertices[far_vertex[f], c] - vertices[t0, c]
-        for q in range(n - 1):
-            dot = 0.0
-            for c in range(d):
-                dot += u[c] * basis[q, c]
-            for c in range(d):
-                u[c] -= dot * basis[q, c]
+        _project_out(u, basis, n - 1, d)
         un = 0.0
         sin_part = 0.0
         cos_part = 0.0
