@@ -192,7 +192,8 @@ def _main(args, trees) -> int:
                       f"{result['seconds']:.1f} s, peak {result['peak_gb']:.2f} GB, "
                       f"same labels as in memory: {same}", flush=True)
         rows += best.values()
-        by_workers = {w: r["seconds"] for (p, w), r in best.items() if p != "in memory"}
+        by_workers = {w: r["seconds"] for (p, w), r in best.items()
+                      if p.startswith("blockwise") and not p.endswith("[base]")}
         if len(by_workers) > 1:
             least = min(by_workers)
             for w in sorted(by_workers):
