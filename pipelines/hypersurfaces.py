@@ -133,10 +133,9 @@ def odt_smooth(points, fixed, iterations: int = 10) -> tuple:
 
 
 def cube_meshes(m: int, seed: int) -> dict:
-    from scipy.spatial import Delaunay
 
     from volseg.tessellation import irregular_cube_mesh, kuhn_cube_mesh
-    from volseg.tessellation.irregular import _delaunay, orient_upward
+    from volseg.tessellation.irregular import delaunay_tetrahedra, orient_upward
 
     rng = np.random.default_rng(seed)
     out = {}
@@ -145,10 +144,10 @@ def cube_meshes(m: int, seed: int) -> dict:
     random = irregular_cube_mesh(m ** 3, seed=seed, smoothing_iterations=0)
     out["random_delaunay"] = (random.points, random.tetrahedra, random.boundary)
     points, _ = odt_smooth(random.points, random.boundary)
-    out["odt_smoothed"] = (points, orient_upward(points, _delaunay(Delaunay, points)),
+    out["odt_smoothed"] = (points, orient_upward(points, delaunay_tetrahedra(points)),
                            random.boundary)
     points, tets, boundary = jittered_bcc(int(round((m ** 3 / 2) ** (1 / 3))) + 1, 0.15, rng)
-    out["jittered_bcc"] = (points, orient_upward(points, _delaunay(Delaunay, points)), boundary)
+    out["jittered_bcc"] = (points, orient_upward(points, delaunay_tetrahedra(points)), boundary)
     return out
 
 

@@ -191,3 +191,21 @@ def test_the_rules_see_a_cycle_and_a_private_import(tmp_path):
     assert _package_of("volseg.morse._edges") == "volseg.morse"
     assert _is_leaf("volseg._kuhn") and not _is_leaf("volseg.morse._kernels")
     assert not _is_leaf("volseg.segment")
+
+
+def test_pipelines_use_only_public_volseg_names():
+    """The batch pipelines are volseg's first users: public names and leaves only."""
+    offences = []
+    for path in sorted((ROOT / "pipelines").rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("volseg"):
+                for alias in node.names:
+                    submodule = f"{node.module}.{alias.name}"
+                    target = submodule if submodule in MODULES else node.module
+                    name = None if submodule in MODULES else alias.name
+                    private = any(p.startswith("_") for p in target.split(".")[1:]) or (
+                        name is not None and name.startswith("_"))
+                    if private and not _is_leaf(target):
+                        offences.append(f"{path.name}:{node.lineno} imports {target}"
+                                        + (f".{name}" if name else ""))
+    assert not offences, "\n".join(offences)

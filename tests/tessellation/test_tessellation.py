@@ -8,9 +8,9 @@ import pytest
 from volseg.analytic import FUNCTIONS
 from volseg.mesh import faces, is_consistently_oriented, ring_average
 from volseg.noise import add_normal_noise
-from volseg.tessellation import kuhn_cube_mesh
+from volseg.tessellation import dihedral_angles, kuhn_cube_mesh
 from volseg.tessellation.diamond import decode, diamond_mesh, interpolation_error
-from volseg.tessellation.irregular import dihedral_angles, irregular_cube_mesh, lift
+from volseg.tessellation.irregular import irregular_cube_mesh, lift
 
 
 def _signed_volumes(points, tetrahedra):
@@ -200,3 +200,13 @@ def test_lift_puts_the_function_in_the_fourth_coordinate():
     points = np.array([[0.0, 0.5, -1.0], [1.0, 1.0, 1.0]])
     f = FUNCTIONS["quadratic_sum"]
     np.testing.assert_allclose(lift(points, f)[:, 3], f(*points.T))
+
+
+def test_the_old_tetrahedron_angles_warn_and_equal_the_one_function():
+    from volseg.tessellation import irregular
+
+    mesh = irregular_cube_mesh(200, seed=1)
+    with pytest.warns(DeprecationWarning, match="volseg.tessellation.dihedral_angles"):
+        old = irregular.dihedral_angles(mesh.points, mesh.tetrahedra)
+    assert np.allclose(old, dihedral_angles(mesh.points, mesh.tetrahedra), atol=1e-9)
+    assert np.array_equal(old.min(axis=1), mesh.min_dihedral)

@@ -14,7 +14,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["IrregularMesh", "irregular_cube_mesh", "orient_upward", "lift", "dihedral_angles"]
+from .mesh_quality import _tetrahedron_angles
+
+__all__ = ["IrregularMesh", "irregular_cube_mesh", "orient_upward", "lift", "delaunay_tetrahedra"]
 
 
 @dataclass
@@ -62,23 +64,13 @@ def lift(points: NDArray, function) -> NDArray[np.float64]:
 
 
 def dihedral_angles(points: NDArray, tetrahedra: NDArray) -> NDArray[np.float64]:
-    """(T, 6) dihedral angles in degrees, at the edges (01, 02, 03, 12, 13, 23)."""
-    p = np.asarray(points, dtype=np.float64)[tetrahedra]
-    # Outward-or-inward face normals; the angle at edge (i, j) is between the normals
-    # of the two faces containing it, i.e. the faces opposite k and l.
-    normals = []
-    for k in range(4):
-        a, b, c = [p[:, i] for i in range(4) if i != k]
-        n = np.cross(b - a, c - a)
-        # point it away from the opposite vertex
-        n *= np.sign(np.einsum("ij,ij->i", n, a - p[:, k]))[:, None]
-        normals.append(n / np.linalg.norm(n, axis=1, keepdims=True))
-    out = []
-    for i, j in [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)]:
-        k, m = [q for q in range(4) if q not in (i, j)]
-        cos = -np.einsum("ij,ij->i", normals[k], normals[m])
-        out.append(np.degrees(np.arccos(np.clip(cos, -1, 1))))
-    return np.stack(out, axis=1)
+    """Deprecated: `volseg.tessellation.dihedral_angles` (any simplicial mesh in any
+    R^d). (T, 6) dihedral angles in degrees of tetrahedra in R^3."""
+    import warnings
+
+    warnings.warn("volseg.tessellation.irregular.dihedral_angles is deprecated: use "
+                  "volseg.tessellation.dihedral_angles", DeprecationWarning, stacklevel=2)
+    return _tetrahedron_angles(points, tetrahedra)
 
 
 def _dart_throw(rng, n, radius, existing, sampler, max_rounds=100):
@@ -127,7 +119,6 @@ def irregular_cube_mesh(n_vertices: int, *, seed=0, min_distance: float = 0.5,
     -------
     IrregularMesh
     """
-    from scipy.spatial import Delaunay
 
     if n_vertices < 27:
         raise ValueError(f"`n_vertices` must be at least 27, got {n_vertices}")
@@ -161,18 +152,21 @@ def irregular_cube_mesh(n_vertices: int, *, seed=0, min_distance: float = 0.5,
     points = np.vstack([boundary_points, interior])
     boundary = np.zeros(len(points), dtype=bool)
     boundary[: len(boundary_points)] = True
-    tetrahedra = _delaunay(Delaunay, points)
+    tetrahedra = delaunay_tetrahedra(points)
     if smoothing_iterations:
         points = _laplacian_smooth(points, tetrahedra, boundary, smoothing_iterations)
-        tetrahedra = _delaunay(Delaunay, points)
+        tetrahedra = delaunay_tetrahedra(points)
     tetrahedra = orient_upward(points, tetrahedra)
-    min_dihedral = dihedral_angles(points, tetrahedra).min(axis=1)
+    min_dihedral = _tetrahedron_angles(points, tetrahedra).min(axis=1)
     return IrregularMesh(points, tetrahedra, boundary, min_dihedral,
                          int(np.sum(min_dihedral < sliver_degrees)))
 
 
-def _delaunay(Delaunay, points):
-    """Delaunay tetrahedra minus the flat ones Qhull leaves on coplanar boundary points."""
+def delaunay_tetrahedra(points: NDArray) -> NDArray[np.intp]:
+    """(T, 4) Delaunay tetrahedra of (P, 3) points (scipy's Qhull) minus the flat ones
+    Qhull leaves on coplanar boundary points; not oriented (see `orient_upward`)."""
+    from scipy.spatial import Delaunay
+
     tetrahedra = Delaunay(points).simplices.astype(np.intp)
     p = points[tetrahedra]
     volume = np.abs(np.linalg.det(p[:, 1:] - p[:, :1])) / 6

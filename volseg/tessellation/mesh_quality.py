@@ -151,8 +151,6 @@ def dihedral_angles(vertices: ArrayLike, simplices: ArrayLike) -> NDArray[np.flo
     -------
     (S, 6) or (S, 3) ndarray of float
     """
-    from .irregular import dihedral_angles as tetrahedron_angles
-
     vertices = np.asarray(vertices, dtype=np.float64)
     simplices = np.asarray(simplices, dtype=np.intp)
     corners = vertices[simplices]
@@ -163,7 +161,7 @@ def dihedral_angles(vertices: ArrayLike, simplices: ArrayLike) -> NDArray[np.flo
     n = simplices.shape[1] - 1
     if n == 3:
         flat = local.reshape(-1, 3)
-        return tetrahedron_angles(flat, np.arange(len(flat)).reshape(-1, 4))
+        return _tetrahedron_angles(flat, np.arange(len(flat)).reshape(-1, 4))
     if n == 2:
         out = []
         for i in range(3):
@@ -173,6 +171,27 @@ def dihedral_angles(vertices: ArrayLike, simplices: ArrayLike) -> NDArray[np.flo
             out.append(np.degrees(np.arccos(np.clip(cos, -1, 1))))
         return np.stack(out, axis=1)
     raise ValueError(f"dihedral angles are defined here for triangles and tetrahedra, got n = {n}")
+
+
+def _tetrahedron_angles(points, tetrahedra) -> NDArray[np.float64]:
+    """(T, 6) dihedral angles in degrees of tetrahedra in R^3, at the edges (01, 02, 03,
+    12, 13, 23)."""
+    p = np.asarray(points, dtype=np.float64)[tetrahedra]
+    # Outward-or-inward face normals; the angle at edge (i, j) is between the normals
+    # of the two faces containing it, i.e. the faces opposite k and l.
+    normals = []
+    for k in range(4):
+        a, b, c = [p[:, i] for i in range(4) if i != k]
+        n = np.cross(b - a, c - a)
+        # point it away from the opposite vertex
+        n *= np.sign(np.einsum("ij,ij->i", n, a - p[:, k]))[:, None]
+        normals.append(n / np.linalg.norm(n, axis=1, keepdims=True))
+    out = []
+    for i, j in [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)]:
+        k, m = [q for q in range(4) if q not in (i, j)]
+        cos = -np.einsum("ij,ij->i", normals[k], normals[m])
+        out.append(np.degrees(np.arccos(np.clip(cos, -1, 1))))
+    return np.stack(out, axis=1)
 
 
 def quality(vertices: ArrayLike, simplices: ArrayLike) -> dict:
