@@ -250,3 +250,33 @@ def test_mask_rules_of_a_dask_volume_equal_in_memory(dtype):
         foreground_mask(lazy, "value>1e9")
     with pytest.raises(ValueError, match="boolean array"):
         foreground_mask(lazy, da.ones((3, 3, 3), dtype=bool))
+
+
+def test_the_stage_sequence_with_blockwise_storage_equals_in_memory(tmp_path, small):
+    """`run_stages` with `BlockwiseStorage` (what `volseg segment` does for a lazy
+    volume), called directly: every stage stored and read back, the same result as
+    the in-memory storage, and the work folder holds every block of each stage."""
+    from volseg.blockwise import BlockwiseStorage
+    from volseg.outputs import output_names
+    from volseg.segment import SegmentRequest, run_stages
+
+    volume = np.round((small - small.min()) * 40).astype(np.uint8)       # 8-bit steps
+    request = SegmentRequest.checked(n_regions=5, mask="auto", smooth_sigma=0.8)
+    eager, eager_range = run_stages(volume, request)
+    lazy = da.from_array(volume, chunks=(7, 6, 5))
+    paths = {kind: tmp_path / name for kind, name in output_names(
+        "v", blockwise=True, voxels=volume.size).items()}
+    said = []
+    storage = BlockwiseStorage(lazy, request, paths, folder=tmp_path, stem="v", checksum="x",
+                               frame=None, say=said.append)
+    result, value_range = run_stages(lazy, request, storage)
+    assert value_range == eager_range and result.value_scale == eager.value_scale
+    assert np.array_equal(np.asarray(result.labels), eager.labels)
+    assert np.array_equal(np.asarray(result.curvature), eager.curvature)
+    assert paths["labels"].exists() and paths["curvature"].exists()   # stored as it went
+    for stage in ("smoothed", "curvature", "ascent", "cells", "pairs"):
+        assert storage.work.finished(stage) == lazy.npartitions, stage
+    assert set(result.timings) == set(eager.timings) == {"curvature", "morse", "cut", "labels"}
+    assert any("smoothing" in line for line in said)
+    storage.finish()
+    assert not storage.work.folder.exists()
