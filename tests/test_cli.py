@@ -151,3 +151,19 @@ def test_info_and_compare(tmp_path, volvis_dir, capsys):
                  "--json"]) == 0
     masked = json.loads(capsys.readouterr().out)
     assert masked["hamming_similarity"] == 1.0 and masked["voxels"] == 32
+
+
+def test_a_degenerate_cut_is_one_warning_line_with_its_fix(volvis_dir, tmp_path, capsys):
+    # tooth, unsmoothed: 92.4 % in one region, 2 regions of 1 % or more (8-bit steps).
+    tooth = str(volvis_dir / "tooth_103x94x161_uint8.raw")
+    assert main(["segment", tooth, "-o", str(tmp_path / "a")]) == 0
+    warnings = [line for line in capsys.readouterr().err.splitlines() if "warning" in line]
+    assert len(warnings) == 1 and "92.4 %" in warnings[0] and "--smooth 1 or 2" in warnings[0]
+    spread = json.loads((tmp_path / "a" / "tooth_summary.json").read_text())["spread"]
+    assert spread["degenerate"] and spread["regions_at_least_1_percent"] == 2
+    # The fix it names works: the largest region then holds a quarter.
+    assert main(["segment", tooth, "--smooth", "2", "-o", str(tmp_path / "b")]) == 0
+    assert "warning" not in capsys.readouterr().err
+    spread = json.loads((tmp_path / "b" / "tooth_summary.json").read_text())["spread"]
+    assert not spread["degenerate"] and spread["largest_share"] < 0.5
+    assert spread["regions_at_least_1_percent"] >= 10

@@ -76,3 +76,25 @@ def test_compare_over_a_mask_scores_only_those_voxels():
     assert scores["hamming_similarity"] == 1.0 and scores["voxels"] == 4
     with pytest.raises(ValueError, match="boolean array"):
         compare(a, b, mask=mask.astype(int))
+
+
+def test_region_spread_of_even_uneven_and_degenerate_cuts():
+    from volseg.metrics import region_spread
+
+    even = region_spread([10] * 8)
+    assert even["largest_share"] == 0.125 and np.isclose(even["effective_regions"], 8.0)
+    assert even["regions_at_least_1_percent"] == 8 and not even["degenerate"]
+    specks = region_spread([9_990, *[1] * 29])          # one region of 99.7 % and specks
+    assert specks["degenerate"] and specks["regions_at_least_1_percent"] == 1
+    shares = np.array([9_990, *[1] * 29]) / 10_019
+    assert np.isclose(specks["effective_regions"], 1 / np.sum(shares**2))
+    assert np.isclose(specks["largest_share"], 9_990 / 10_019)
+    two = region_spread([60, 40])                        # uneven, but two real regions
+    assert two["largest_share"] == 0.6 and not two["degenerate"]
+    big_background = region_spread([550, *[15] * 30])    # 55 % and 30 real regions
+    assert not big_background["degenerate"]
+    one = region_spread([100])                           # asked for one region: all of it
+    assert one["largest_share"] == 1.0 and not one["degenerate"]
+    assert region_spread([995, 5])["degenerate"]          # two regions, one a speck
+    with pytest.raises(ValueError, match="sizes"):
+        region_spread([])

@@ -26,7 +26,14 @@ import numpy as np
 from . import _validate
 from .errors import UsageError
 from .io import Frame, OutputSet
-from .outputs import files_sha256, output_names, result_title, summary, write_result_files
+from .outputs import (
+    degenerate_cut_warning,
+    files_sha256,
+    output_names,
+    result_title,
+    summary,
+    write_result_files,
+)
 from .segment import InMemory, SegmentRequest, run_stages
 
 __all__ = ["segment_files", "segment_to_files", "series_to_files", "segment_series_files",
@@ -220,8 +227,12 @@ def segment_to_files(volume, outputs, *, operator="weighted", n_regions=None,
             info["blockwise"] = storage.describe(result.hierarchy)
         info["timings_s"]["total"] = round(time.perf_counter() - started, 4)
         info["outputs"] = {kind: str(path) for kind, path in outputs.targets.items()}
+        warning = degenerate_cut_warning(name, result, info["spread"], data.dtype)
+        if warning:
+            say(warning)
         write_result_files(paths, result, data, info, frame=frame,
-                           title=result_title(name, result, blockwise=lazy),
+                           title=result_title(name, result, blockwise=lazy,
+                                              spread=info["spread"]),
                            value_range=value_range)
         done["info"], done["storage"] = info, storage
 

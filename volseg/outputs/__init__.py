@@ -13,6 +13,7 @@ from ._summary import (
     BLOCKWISE_SUFFIXES,
     LISTED_PERSISTENCES,
     OUTPUT_SUFFIXES,
+    degenerate_cut_warning,
     files_sha256,
     input_summary,
     output_names,
@@ -24,4 +25,5 @@ from ._write import write_result_files, write_segmentation
 
 __all__ = ["OUTPUT_SUFFIXES", "BLOCKWISE_SUFFIXES", "BLOCKWISE_NIFTI_VOXELS",
            "LISTED_PERSISTENCES", "output_names", "files_sha256", "summary", "result_summary",
-           "input_summary", "result_title", "write_result_files", "write_segmentation"]
+           "input_summary", "result_title", "degenerate_cut_warning", "write_result_files",
+           "write_segmentation"]

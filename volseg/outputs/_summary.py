@@ -16,7 +16,7 @@ from .._version import __version__
 from ..io import Frame
 
 __all__ = ["OUTPUT_SUFFIXES", "BLOCKWISE_NIFTI_VOXELS", "output_names", "files_sha256", "summary",
-           "result_summary", "input_summary", "result_title"]
+           "result_summary", "input_summary", "result_title", "degenerate_cut_warning"]
 
 OUTPUT_SUFFIXES = {"labels": "_labels.nii.gz", "curvature": "_curvature.nii.gz",
                    "summary": "_summary.json", "preview": "_preview.png"}
@@ -71,7 +71,10 @@ def files_sha256(paths) -> str | None:
 
 def result_summary(result) -> dict:
     """The part of a summary every `Segmentation` has, volume or mesh: operator, cut,
-    persistence, regions, timings."""
+    persistence, regions and their spread (`volseg.metrics.region_spread`), timings."""
+    from ..metrics import region_spread
+
+    regions = result.region_table()
     return {
         "operator": result.operator,
         "n_regions": result.n_regions,
@@ -86,7 +89,8 @@ def result_summary(result) -> dict:
             f"largest_{LISTED_PERSISTENCES}": np.sort(
                 result.hierarchy.event_persistence)[::-1][:LISTED_PERSISTENCES].tolist(),
         },
-        "regions": result.region_table(),
+        "regions": regions,
+        "spread": region_spread([r["size"] for r in regions]),
         "timings_s": {k: round(v, 4) for k, v in result.timings.items()},
     }
 
@@ -125,12 +129,35 @@ def summary(result, *, name, source=None, checksum=None, files=(), frame: Frame 
     return out
 
 
-def result_title(name: str, result, *, blockwise: bool = False) -> str:
+def result_title(name: str, result, *, blockwise: bool = False, spread=None) -> str:
     """The preview's title of a volume's `Segmentation`: regions, operator, smoothing,
-    mask, path."""
+    mask, path; with a degenerate `spread` (`volseg.metrics.region_spread`), that too."""
     title = f"{name}: {result.n_regions} regions, {result.operator.replace('_', '-')} curvature"
     if result.smooth_sigma:
         title += f", smoothed sigma {result.smooth_sigma:g}"
     if result.mask is not None and result.mask.mask is not None:
         title += f", mask {result.mask.used}"
-    return title + (" (blockwise)" if blockwise else "")
+    title += " (blockwise)" if blockwise else ""
+    if spread is not None and spread["degenerate"]:
+        title += (f"; degenerate cut: the largest region holds "
+                  f"{100 * spread['largest_share']:.1f} %")
+    return title
+
+
+def degenerate_cut_warning(name: str, result, spread: dict, dtype) -> str | None:
+    """One line for a degenerate cut (None otherwise): the spread, the likely cause and
+    the option that fixes it."""
+    if not spread["degenerate"]:
+        return None
+    what = (f"{name}: the largest of {result.n_regions} regions holds "
+            f"{100 * spread['largest_share']:.1f} % of the labelled voxels and only "
+            f"{spread['regions_at_least_1_percent']} hold 1 % or more")
+    if result.smooth_sigma == 0 and np.dtype(dtype).kind in "biu":
+        fix = ("on integer data the quantization steps dominate the curvature; "
+               "try --smooth 1 or 2")
+    elif result.smooth_sigma == 0:
+        fix = "noise or voxel-scale detail dominates the curvature; try --smooth 1"
+    else:
+        fix = (f"try a larger --smooth than {result.smooth_sigma:g}, or --mask to leave "
+               "the background out")
+    return f"warning: {what}: {fix}"
