@@ -89,8 +89,9 @@ def clean_reference(volume, operator, regions, mask="none", threads=1):
     from volseg import segment_volume
 
     _single_threaded(threads)
+    # The paper's cut: persistence, no pre-smoothing (volseg's defaults for scans differ).
     clean = segment_volume(np.asarray(volume, dtype=np.float64), operator=operator,
-                           n_regions=regions, mask=mask)
+                           n_regions=regions, mask=mask, measure="persistence", smooth_sigma=0)
     data = np.asarray(volume)
     return {"threshold": clean.min_persistence, "value_scale": clean.value_scale,
             "n_regions": clean.n_regions, "labels": clean.labels, "mask": clean.mask.mask,
@@ -139,7 +140,7 @@ def run_task(task, volume, reference, threads=1):
            else {"min_persistence": reference["threshold"]})
     mask = reference["mask"]
     result = segment_volume(data, operator=task["operator"], value_scale=reference["value_scale"],
-                            mask=mask, **cut)
+                            mask=mask, measure="persistence", smooth_sigma=0, **cut)
     clean = reference["labels"]
     scores = compare(clean, result.labels, mask=mask)  # a masked run scores its foreground
     # Plateaus (fuel and neghip are about half exact zeros) have zero curvature, so

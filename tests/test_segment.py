@@ -9,13 +9,18 @@ def test_segment_volume_defaults_to_30_regions_and_accepts_volume_or_array():
     data = demo_volume(32)
     result = segment_volume(data)
     assert result.n_regions == 30 and result.labels.shape == data.shape
+    assert (result.measure, result.smooth_sigma, result.mask.used) == (
+        "hypervolume", 1.0, "nonzero")   # the defaults for 8-bit data with a zero plateau
     again = segment_volume(Volume(data, spacing=(1.0, 1.0, 1.0)))
     np.testing.assert_array_equal(again.labels, result.labels)
     recut = result.hierarchy.segment(n_regions=10)
-    assert recut.max() + 1 == 10
-    # Regions are 1..k (0 is kept for voxels outside a mask); region 1 has the top maximum.
-    assert result.labels.min() == 1 and result.labels.max() == 30
+    assert recut.max() == 10          # with a mask: regions 1..k, 0 outside
+    # Regions are 1..k (0 for voxels outside the mask); region 1 has the top maximum.
+    assert result.labels.min() == 0 and result.labels.max() == 30
+    assert ((result.labels == 0) == (data == 0)).all()
     assert result.labels[np.unravel_index(result.region_maxima()[0], data.shape)] == 1
+    plain = segment_volume(data, mask=None, smooth_sigma=0, measure="persistence")
+    assert plain.labels.min() == 1 and plain.labels.max() == 30
 
 
 def test_blob_centres_are_curvature_maxima():
@@ -25,7 +30,7 @@ def test_blob_centres_are_curvature_maxima():
     x, y, z = np.meshgrid(axis, axis, axis, indexing="ij")
     centres = [(-0.5, -0.5, 0), (0.5, -0.4, 0.3), (0, 0.5, -0.4)]
     f = sum(np.exp(-((x - a) ** 2 + (y - b) ** 2 + (z - c) ** 2) / 0.04) for a, b, c in centres)
-    labels = segment_volume(f, n_regions=4).labels
+    labels = segment_volume(f, n_regions=4, measure="persistence", mask=None).labels
     index = [tuple(np.round((np.array(c) + 1) * 16).astype(int)) for c in centres]
     assert len({labels[i] for i in index}) == 3
 
@@ -69,7 +74,7 @@ def test_zero_background_and_two_blobs_give_exactly_two_foreground_regions():
     left, right = result.labels[6, 12, 12], result.labels[17, 12, 12]
     assert {left, right} == {1, 2}
     # Unmasked, the empty plateau is carved into the regions (index tie-breaking).
-    assert segment_volume(volume, min_persistence=0.05).labels.min() == 1
+    assert segment_volume(volume, min_persistence=0.05, mask=None).labels.min() == 1
 
 
 def test_each_mask_component_gets_a_region_and_counts_are_foreground_regions():
@@ -82,8 +87,9 @@ def test_each_mask_component_gets_a_region_and_counts_are_foreground_regions():
 
 def test_smooth_zero_is_bit_identical_and_smoothing_removes_the_checkerboard():
     data = demo_volume(32)
-    plain = segment_volume(data)
-    np.testing.assert_array_equal(segment_volume(data, smooth_sigma=0).curvature, plain.curvature)
+    plain = segment_volume(data, smooth_sigma=0)
+    np.testing.assert_array_equal(segment_volume(data, smooth_sigma=0.0).curvature,
+                                  plain.curvature)
     smoothed = segment_volume(data, smooth_sigma=1.0)
 
     def total_variation(h):
@@ -96,7 +102,8 @@ def test_smooth_zero_is_bit_identical_and_smoothing_removes_the_checkerboard():
 
 
 def test_regions_auto_picks_the_largest_gap_in_the_papers_range():
-    result = segment_volume(demo_volume(32), n_regions="auto")
+    result = segment_volume(demo_volume(32), n_regions="auto", measure="persistence",
+                            mask=None, smooth_sigma=0)
     assert 20 <= result.n_regions <= 40 and result.cut["auto"]
     p = np.sort(result.hierarchy.event_persistence)[::-1]
     gaps = {k: np.log(p[k - 2]) - np.log(p[k - 1]) for k in range(20, 41)}

@@ -80,6 +80,14 @@ def number(value, name: str, *, positive: bool = False) -> float:
     return result
 
 
+def share(value, name: str) -> float:
+    """A share: a number in [0, 1); the message names the argument."""
+    result = number(value, name)
+    if not 0 <= result < 1:
+        raise ValueError(f"`{name}` must be a share in [0, 1), got {value!r}")
+    return result
+
+
 def value_scale(value) -> float:
     """The scale s of the value axis: a positive finite number."""
     return number(value, "value_scale", positive=True)

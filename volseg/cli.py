@@ -17,7 +17,14 @@ from ._version import __version__
 from .blockwise.engine import MEMORY_SHARE
 from .curvature import cli_choices, normalize_operator
 from .errors import UsageError
-from .segment import AUTO_REGION_RANGE, DEFAULT_REGIONS
+from .morse import MEASURES
+from .segment import (
+    AUTO_INTEGER_SIGMA,
+    AUTO_REGION_RANGE,
+    DEFAULT_MEASURE,
+    DEFAULT_MIN_COMPONENT,
+    DEFAULT_REGIONS,
+)
 
 
 def _get_parser() -> argparse.ArgumentParser:
@@ -46,18 +53,37 @@ def _add_segment(sub):
                      help=f"number of regions (default {DEFAULT_REGIONS}; with a mask, foreground "
                      f"regions), or 'auto': the count in {AUTO_REGION_RANGE[0]}-"
                      f"{AUTO_REGION_RANGE[1]} at the largest persistence gap")
-    cut.add_argument("--min-persistence", type=float, metavar="T", help="persistence threshold")
+    cut.add_argument("--min-persistence", type=float, metavar="T",
+                     help="instead of a count: merge every peak of the curvature less "
+                     "persistent than T (the persistence measure only)")
+    cut.add_argument("--threshold", type=float, metavar="T",
+                     help="instead of a count: merge every region whose --measure is below T "
+                     "(size: in world units, voxels times the voxel volume)")
+    seg.add_argument("--measure", choices=MEASURES, default=None,
+                     help=f"what decides which regions survive the cut (default "
+                     f"{DEFAULT_MEASURE}; persistence with --min-persistence): persistence "
+                     "keeps the tallest curvature peaks (on 8-bit or noisy data, voxel-sized "
+                     "spikes); size the largest regions (the "
+                     "smallest merges into its neighbour across their highest saddle); "
+                     "hypervolume weighs size by height (Carr et al. 2004)")
+    seg.add_argument("--min-component", type=float, default=None, metavar="SHARE",
+                     help="mask components smaller than this share of the mask are labelled 0 "
+                     f"and use no region (default {DEFAULT_MIN_COMPONENT:g}; 0 keeps all)")
     masking = seg.add_mutually_exclusive_group()
     masking.add_argument("--mask", default="auto", metavar="RULE",
-                         help="voxels to segment: auto (default: the minimum plateau is "
-                         "masked out when it covers more than half the volume), none, "
-                         "nonzero, otsu, or 'value>T' (also >=, <, <=)")
+                         help="voxels to segment: auto (default: a plateau over half the "
+                         "volume, at the minimum or a signed map's 0, is left out; else a "
+                         "dominant low mode of the histogram, noisy air in CT or MRI, below "
+                         "its triangle threshold; else nothing), none, nonzero, otsu, or "
+                         "'value>T' (also >=, <, <=)")
     masking.add_argument("--mask-threshold", type=float, metavar="T",
                          help="segment the voxels with value > T (same as --mask 'value>T')")
-    seg.add_argument("--smooth", "--smooth-sigma", dest="smooth_sigma", type=float, default=0.0,
+    seg.add_argument("--smooth", "--smooth-sigma", dest="smooth_sigma", type=float, default=None,
                      metavar="SIGMA",
-                     help="Gaussian pre-smoothing of the values, sigma in voxels (default 0: "
-                     "none); 1 tames the checkerboard of 8-bit data")
+                     help="Gaussian pre-smoothing of the values, sigma in voxels; 0: none. "
+                     f"Default: {AUTO_INTEGER_SIGMA:g} for integer data of up to 16 bits (their "
+                     "quantization steps are voxel-sized curvature noise), 0 for floats. "
+                     "Larger: fewer, rounder regions; features under about 2 SIGMA vanish")
     seg.add_argument("--plot-persistence", action="store_true",
                      help="also write <name>_persistence.png, the persistence curve alone")
     seg.add_argument("--chunks", type=int, metavar="N",
@@ -201,6 +227,16 @@ def _check_cut_options(args):
     if args.min_persistence is not None and not args.min_persistence >= 0:
         raise UsageError("--min-persistence must be a non-negative number, got "
                          f"{args.min_persistence}")
+    threshold = getattr(args, "threshold", None)
+    if threshold is not None and not threshold >= 0:
+        raise UsageError(f"--threshold must be a non-negative number, got {threshold}")
+    measure = getattr(args, "measure", None)
+    if args.min_persistence is not None and measure not in (None, "persistence"):
+        raise UsageError(f"--min-persistence is a threshold of persistence; with --measure "
+                         f"{measure} give --threshold")
+    share = getattr(args, "min_component", None)
+    if share is not None and not 0 <= share < 1:
+        raise UsageError(f"--min-component must be a share in [0, 1), got {share}")
 
 
 def _cmd_segment(args):
@@ -215,7 +251,8 @@ def _cmd_segment(args):
     # Read and check every input before writing or computing anything.
     if args.chunks is not None and args.chunks < 2:
         raise UsageError(f"--chunks must be at least 2 voxels, got {args.chunks}")
-    if not (np.isfinite(args.smooth_sigma) and args.smooth_sigma >= 0):
+    if args.smooth_sigma is not None and not (np.isfinite(args.smooth_sigma)
+                                              and args.smooth_sigma >= 0):
         raise UsageError(f"--smooth must be a non-negative number of voxels, got "
                          f"{args.smooth_sigma}")
     mask = args.mask if args.mask_threshold is None else f"value>{args.mask_threshold!r}"
@@ -230,7 +267,8 @@ def _cmd_segment(args):
         persistence_plot=args.plot_persistence, engine=engine, say=say,
         operator=normalize_operator(args.operator), n_regions=args.regions,
         min_persistence=args.min_persistence, value_scale=args.value_scale, noise=args.noise,
-        seed=args.seed, mask=mask, smooth_sigma=args.smooth_sigma)
+        seed=args.seed, mask=mask, smooth_sigma=args.smooth_sigma, measure=args.measure,
+        threshold=args.threshold, min_component=args.min_component)
     if args.json:
         print(_json.dumps(summaries if len(summaries) > 1 else summaries[0], indent=2))
     return 0

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import os
 import time
+import warnings
 from contextlib import ExitStack
 from pathlib import Path
 
@@ -186,7 +187,8 @@ def segment_files(volumes, out_dir, *, force=False, wait=False, persistence_plot
 
 def segment_to_files(volume, outputs, *, operator="weighted", n_regions=None,
                      min_persistence=None, value_scale=None, noise=None, seed=0, mask=None,
-                     smooth_sigma=0.0, padding="linear", engine=None, say=_quiet) -> dict:
+                     smooth_sigma=None, padding="linear", measure=None, threshold=None,
+                     min_component=None, engine=None, say=_quiet) -> dict:
     """Segment `volume` and write its output set (an entered `OutputSet` named by
     `output_names`); returns the summary. A lazily read volume (its data a Dask
     array) takes the blockwise path: each stage stored in the set's staging files and
@@ -198,16 +200,19 @@ def segment_to_files(volume, outputs, *, operator="weighted", n_regions=None,
     _refuse_noise_when_lazy([volume], noise)
     if lazy:
         data = _validate.lazy_volume_array(volume.data)
+        dtype = data.dtype
     else:
         from .noise import add_value_noise
 
         data = np.asarray(volume)
+        dtype = data.dtype       # the smoothing rule reads the file's type, not the noise's
         if noise:
             data = add_value_noise(data, noise, seed=seed)
     request = SegmentRequest.checked(
         operator=operator, min_persistence=min_persistence, n_regions=n_regions,
         value_scale=value_scale, spacing=volume.spacing, padding=padding, mask=mask,
-        smooth_sigma=smooth_sigma)
+        smooth_sigma=smooth_sigma, measure=measure, threshold=threshold,
+        min_component=min_component, dtype=dtype)
     name, checksum = volume.name, files_sha256(volume.files)
     frame = volume.frame or Frame.from_spacing(request.spacing)
     done = {}
@@ -217,7 +222,15 @@ def segment_to_files(volume, outputs, *, operator="weighted", n_regions=None,
         blocks = f" in {storage.chunks} blocks" if lazy else ""
         say(f"{name}: curvature ({request.operator.name}) and Morse complex of a "
             f"{'x'.join(map(str, data.shape))} volume{blocks}")
-        result, value_range = run_stages(data, request, storage)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", UserWarning)
+            result, value_range = run_stages(data, request, storage)
+        for warning in caught:        # one line each (fewer maxima than asked, ...)
+            if issubclass(warning.category, UserWarning):
+                say(f"{name}: warning: {warning.message}")
+            else:
+                warnings.warn_explicit(warning.message, warning.category, warning.filename,
+                                       warning.lineno)
         say(f"{name}: {result.n_regions} regions{result.mask.phrase()} from "
             f"{len(result.hierarchy.maxima)} maxima; writing")
         info = summary(result, name=name, source=volume.path, checksum=checksum,

@@ -10,9 +10,20 @@ the whole volume (a mask never changes the geometry of the graph in R^4).
 Rules (`foreground_mask`):
 
 - ``None`` / ``"none"``: no mask, every voxel is segmented;
-- ``"auto"``: ``"nonzero"`` when the minimum-value plateau covers more than
-  `AUTO_PLATEAU_SHARE` of the volume (fuel 94.8 %, neghip 53.6 %), else no mask
-  (silicium 41.6 %, nucleon 18.3 %, tooth 0 %, the demo 49.7 %);
+- ``"auto"``, the first of these that applies:
+
+  1. a *plateau*: when the voxels at the volume's minimum cover more than
+     `AUTO_PLATEAU_SHARE` of it (fuel 94.8 %, neghip 53.6 %, a skull-stripped MRI's
+     exact zeros), they are masked out (``"nonzero"``); a signed volume (minimum
+     below 0, maximum above) whose voxels at exactly 0 cover more than that share
+     (a statistical map's background) has them masked out (``"value!=0"``);
+  2. a *low mode*: when the histogram (256 bins, one per value for integers, as
+     scikit-image's) peaks in the lowest `AUTO_LOW_MODE_RANGE` of the value range
+     and the triangle threshold of that peak (Zack et al. 1977, as scikit-image's
+     `threshold_triangle`) leaves at least `AUTO_BACKGROUND_SHARE` of the voxels
+     at or below it: the background is noise about a low value (air in CT and MRI,
+     Rician noise), masked out as ``"value>T"``;
+  3. else no mask (nucleon, tooth, a simulation without background);
 - ``"nonzero"``: value above the volume's minimum;
 - ``"value>T"``, ``"value>=T"``, ``"value<T"``, ``"value<=T"``: a threshold;
 - ``"otsu"``: value above Otsu's threshold (scikit-image);
@@ -29,10 +40,15 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["foreground_mask", "check_rule", "MaskChoice", "AUTO_PLATEAU_SHARE", "MASK_RULES"]
+__all__ = ["foreground_mask", "check_rule", "MaskChoice", "AUTO_PLATEAU_SHARE",
+           "AUTO_LOW_MODE_RANGE", "AUTO_BACKGROUND_SHARE", "MASK_RULES"]
 
 #: ``"auto"`` masks the minimum plateau when it covers more than this share of the voxels.
 AUTO_PLATEAU_SHARE = 0.5
+#: ``"auto"``'s low mode: the histogram's peak lies in this lowest share of the range ...
+AUTO_LOW_MODE_RANGE = 0.125
+#: ... and at least this share of the voxels is at or below its triangle threshold.
+AUTO_BACKGROUND_SHARE = 0.25
 MASK_RULES = ("auto", "none", "nonzero", "otsu", "value>T", "value>=T", "value<T", "value<=T")
 _THRESHOLD = re.compile(r"^\s*value\s*(>=|<=|>|<)\s*([-+0-9.eE]+|[-+]?inf)\s*$")
 
@@ -101,16 +117,16 @@ def foreground_mask(volume, rule="auto") -> MaskChoice:
             mask = _like(mask, data)
         return _checked(MaskChoice(mask, "array", "array", 0))
     name, threshold = check_rule(rule)
-    if name in ("auto", "nonzero"):
-        # The mask is the complement of the minimum plateau: one pass finds both.
-        lowest, at_lowest = _minimum_plateau(data, lazy)
-        mask = data > lowest
+    if name == "auto":
+        return _auto(data, lazy)
+    if name == "nonzero":
+        lowest, at_lowest = _plateau(data, lazy)
         voxels = int(data.size - at_lowest) if lowest == lowest else 0    # NaN: none
-        if name == "auto" and 1.0 - voxels / data.size <= AUTO_PLATEAU_SHARE:
-            return MaskChoice(None, "auto", "none", int(data.size))
-        return _checked(MaskChoice(mask, name, "nonzero", voxels))
+        return _checked(MaskChoice(data > lowest, name, "nonzero", voxels))
     if name == "otsu":
-        threshold = _otsu(data)
+        from skimage.filters import threshold_otsu
+
+        threshold = float(threshold_otsu(hist=_histogram(data, lazy)))
         return _checked(MaskChoice(data > threshold, "otsu", f"value>{threshold:g}", 0))
     op, value = threshold
     compare = {">": np.greater, ">=": np.greater_equal, "<": np.less, "<=": np.less_equal}[op]
@@ -143,21 +159,100 @@ def _compute(x):
     return x.compute() if hasattr(x, "compute") else x
 
 
-def _minimum_plateau(data, lazy: bool):
-    """The volume's minimum and how many voxels hold it; for a Dask volume in one pass
-    (each block's minimum and its count there, joined here)."""
+def _auto(data, lazy: bool) -> MaskChoice:
+    """The ``"auto"`` rule of the module docstring: a plateau, a low mode, or none."""
+    lowest, highest = _range(data, lazy)
+    level, at_level = _plateau(data, lazy)
+    if at_level > AUTO_PLATEAU_SHARE * data.size:
+        return _checked(MaskChoice(data > level, "auto", "nonzero", int(data.size - at_level)))
+    if lowest < 0 < highest:
+        _, at_zero = _plateau(data, lazy, 0)
+        if at_zero > AUTO_PLATEAU_SHARE * data.size:
+            return _checked(MaskChoice(data != 0, "auto", "value!=0", int(data.size - at_zero)))
+    counts, centers = _histogram(data, lazy)
+    peak = int(np.argmax(counts))
+    if (centers[peak] - lowest) <= AUTO_LOW_MODE_RANGE * (highest - lowest):
+        threshold = _triangle(counts, centers)
+        below = counts[centers <= threshold].sum()
+        if below >= AUTO_BACKGROUND_SHARE * data.size:
+            return _checked(MaskChoice(data > threshold, "auto", f"low mode: value>{threshold:g}",
+                                       0))
+    return MaskChoice(None, "auto", "none", int(data.size))
+
+
+def _range(data, lazy: bool) -> tuple:
+    if lazy:
+        import dask
+
+        return tuple(float(v) for v in dask.compute(data.min(), data.max()))
+    return float(data.min()), float(data.max())
+
+
+def _plateau(data, lazy: bool, level=None):
+    """The plateau's value (default the minimum) and how many voxels hold it; for a
+    Dask volume in one pass (each block's minimum and its count there, joined here)."""
     if not lazy:
-        lowest = data.min()
-        return lowest, int(np.count_nonzero(data == lowest))
+        level = data.min() if level is None else level
+        return level, int(np.count_nonzero(data == level))
     import dask
 
     one = tuple((1,) * n for n in data.numblocks)
+    if level is not None:
+        counts = data.map_blocks(lambda b: np.full((1, 1, 1), np.count_nonzero(b == level)),
+                                 chunks=one, dtype=np.int64)
+        return level, int(_compute(counts.sum()))
     lows = data.map_blocks(lambda b: np.min(b, keepdims=True), chunks=one, dtype=data.dtype)
     counts = data.map_blocks(lambda b: np.full((1, 1, 1), np.count_nonzero(b == b.min())),
                              chunks=one, dtype=np.int64)
     lows, counts = dask.compute(lows, counts)     # the blocks are read once for both
     lowest = lows.min()
     return lowest, int(counts[lows == lowest].sum())
+
+
+def _histogram(data, lazy: bool) -> tuple:
+    """(counts, bin centres) of the volume as scikit-image's `exposure.histogram`
+    makes it (integers: one bin per value from the minimum to the maximum; floats:
+    256 bins over [min, max]), summed over the blocks for a Dask volume."""
+    if not lazy:
+        from skimage.exposure import histogram
+
+        return histogram(data.ravel(), 256, source_range="image")
+    import dask
+    import dask.array as da
+
+    lo, hi = (v.item() for v in dask.compute(data.min(), data.max()))
+    if data.dtype.kind in "biu":
+        width = int(hi) - int(lo) + 1
+        counts = data.map_blocks(
+            lambda b: np.bincount((b.astype(np.int64) - int(lo)).ravel(),
+                                  minlength=width)[None, None, None], dtype=np.int64,
+            chunks=((1,) * data.numblocks[0], (1,) * data.numblocks[1],
+                    (1,) * data.numblocks[2], (width,)), new_axis=3)
+        return _compute(counts.sum(axis=(0, 1, 2))), np.arange(int(lo), int(hi) + 1)
+    if lo == hi:
+        return np.array([data.size]), np.array([lo])
+    counts, edges = da.histogram(data, bins=256, range=(lo, hi))
+    return _compute(counts), (edges[:-1] + edges[1:]) / 2
+
+
+def _triangle(counts, centers) -> float:
+    """The triangle threshold of a histogram (Zack, Rogers, Latt 1977), the algorithm
+    of scikit-image's `threshold_triangle` (which takes no histogram): the level
+    farthest below the line from the peak to the end of the longer tail."""
+    counts = np.asarray(counts, dtype=np.float64)
+    n = len(counts)
+    peak = int(np.argmax(counts))
+    low, high = np.flatnonzero(counts)[[0, -1]]
+    if low == high:
+        return float(centers[low])
+    flip = peak - low < high - peak
+    if flip:
+        counts, low, peak = counts[::-1], n - high - 1, n - peak - 1
+    width = peak - low
+    x = np.arange(width)
+    norm = np.hypot(counts[peak], width)
+    level = int(np.argmax(counts[peak] / norm * x - width / norm * counts[x + low])) + low
+    return float(centers[n - level - 1] if flip else centers[level])
 
 
 def _count(mask) -> int:
@@ -169,36 +264,3 @@ def _like(mask, data):
     import dask.array as da
 
     return da.asarray(mask).rechunk(data.chunks)
-
-
-def _otsu(data) -> float:
-    """scikit-image's `threshold_otsu` of the volume, from a histogram summed over the
-    blocks for a Dask volume: the same histogram as scikit-image's of the whole array
-    (integers: one bin per value from the minimum to the maximum; floats: 256 bins
-    over [min, max]), so the same threshold."""
-    from skimage.filters import threshold_otsu
-
-    from ._validate import is_lazy
-
-    if not is_lazy(data):
-        return float(threshold_otsu(data.ravel()))
-    import dask
-    import dask.array as da
-
-    lo, hi = (v.item() for v in dask.compute(data.min(), data.max()))
-    if lo == hi:
-        return float(lo)           # threshold_otsu of a constant image: its value
-    if data.dtype.kind in "biu":
-        width = int(hi) - int(lo) + 1
-        counts = data.map_blocks(
-            lambda b: np.bincount((b.astype(np.int64) - int(lo)).ravel(),
-                                  minlength=width)[None, None, None], dtype=np.int64,
-            chunks=((1,) * data.numblocks[0], (1,) * data.numblocks[1],
-                    (1,) * data.numblocks[2], (width,)), new_axis=3)
-        counts = _compute(counts.sum(axis=(0, 1, 2)))
-        centers = np.arange(int(lo), int(hi) + 1)
-    else:
-        counts, edges = da.histogram(data, bins=256, range=(lo, hi))
-        counts = _compute(counts)
-        centers = (edges[:-1] + edges[1:]) / 2
-    return float(threshold_otsu(hist=(counts, centers)))

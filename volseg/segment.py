@@ -30,13 +30,22 @@ from .curvature import (
     get_operator,
 )
 from .masks import MaskChoice, foreground_mask
-from .morse import MorseHierarchy, check_cut, descending_complex
+from .morse import MorseHierarchy, check_measure_cut, descending_complex
 
 __all__ = ["Segmentation", "SegmentRequest", "CutRequest", "Storage", "InMemory", "run_stages",
-           "segment_volume", "segment_mesh", "DEFAULT_REGIONS", "AUTO_REGION_RANGE"]
+           "segment_volume", "segment_mesh", "DEFAULT_REGIONS", "DEFAULT_MEASURE",
+           "DEFAULT_MIN_COMPONENT", "AUTO_REGION_RANGE", "AUTO_INTEGER_SIGMA",
+           "auto_smoothing"]
 
 #: Default cut: 30 regions, the middle of the paper's 20-40 range.
 DEFAULT_REGIONS = 30
+#: Mask components holding less than this share of the mask are labelled 0 (they
+#: take no region of the count): the specks a threshold leaves in noise.
+DEFAULT_MIN_COMPONENT = 0.001
+#: Default Gaussian pre-smoothing (voxels) of integer data of at most 16 bits.
+AUTO_INTEGER_SIGMA = 1.0
+#: Default measure of the cut (DESIGN.md section 12).
+DEFAULT_MEASURE = "hypervolume"
 #: Where ``n_regions="auto"`` looks for the largest persistence gap: the paper's range.
 AUTO_REGION_RANGE = (20, 40)
 
@@ -58,18 +67,25 @@ class Segmentation:
     n_regions : int
         Regions (foreground regions, with a mask).
     operator, min_persistence, value_scale, spacing
-        The parameters used; `min_persistence` is the threshold of the cut (for a
-        region-count cut, one that gives the same count where ties allow).
+        The parameters used; `min_persistence` is the persistence threshold of a
+        persistence cut (for a region-count cut, one that gives the same count where
+        ties allow), None for a cut by another measure.
+    measure, threshold
+        The cut's measure (`volseg.morse.MEASURES`) and its threshold in that
+        measure (for a count, as `min_persistence`); sizes in world units (voxel
+        volume from the spacing; a mesh's vertex volumes).
     mask : MaskChoice
         The mask used (``mask.mask`` is None for none) and how it was chosen.
     timings : dict of str -> float
         Seconds per stage: ``curvature``, ``morse``, ``cut``, ``labels`` on every
         path (a lazy Dask run computes its curvature inside ``morse``).
     cut : dict
-        The cut as asked (``min_persistence``, ``n_regions``, and ``auto`` when the
-        count was chosen at the largest persistence gap).
+        The cut as asked (``measure``, ``threshold``, ``n_regions``, and ``auto``
+        when the count was chosen at the largest gap of the measure).
     smooth_sigma : float
         A volume's Gaussian pre-smoothing, sigma in voxels (0: none).
+    smooth_rule : str
+        How `smooth_sigma` was chosen: ``"given"``, or the `auto_smoothing` rule.
     smooth_rounds : int
         A mesh's rounds of 1-ring averaging of the curvature (0: none).
     padding : str or None
@@ -81,7 +97,7 @@ class Segmentation:
     hierarchy: MorseHierarchy
     n_regions: int
     operator: str
-    min_persistence: float
+    min_persistence: float | None
     value_scale: float | None
     spacing: tuple | None
     timings: dict = field(default_factory=dict)
@@ -92,6 +108,9 @@ class Segmentation:
     padding: str | None = None
     vertices: NDArray[np.float64] | None = None
     simplices: NDArray[np.intp] | None = None
+    measure: str = "persistence"
+    threshold: float | None = None
+    smooth_rule: str = "given"
 
     @property
     def smooth(self):
@@ -101,14 +120,19 @@ class Segmentation:
         return self.smooth_rounds if self.vertices is not None else self.smooth_sigma
 
     def _cut(self) -> dict:
-        return {"min_persistence": self.cut.get("min_persistence"),
-                "n_regions": self.cut.get("n_regions")}
+        return {"n_regions": self.cut.get("n_regions"), "threshold": self.cut.get("threshold"),
+                "measure": self.cut.get("measure", "persistence"),
+                "min_component": self.cut.get("min_component", 0.0)}
 
     def _region_tops(self) -> NDArray[np.int64]:
         """(k,) maximum id of each region's highest maximum."""
-        region = self.hierarchy.region_of_maximum(**self._cut())
-        # Maximum ids run by decreasing value: the first id seen per region is its top.
-        return np.unique(region, return_index=True)[1]
+        with warnings.catch_warnings():    # the cut's warnings were given when it was made
+            warnings.simplefilter("ignore", UserWarning)
+            region = self.hierarchy.region_of_maximum(**self._cut())
+        # Maximum ids run by decreasing value: the first id seen per region is its top
+        # (-1, a dropped component, sorts first).
+        ids, tops = np.unique(region, return_index=True)
+        return tops[ids >= 0]
 
     def region_maxima(self) -> NDArray[np.int64]:
         """(k,) flat voxel index of each region's highest curvature maximum (region
@@ -145,21 +169,47 @@ class Segmentation:
 
 @dataclass(frozen=True)
 class CutRequest:
-    """The cut asked of a hierarchy: a persistence threshold, a region count, or
-    ``auto`` (the count in `AUTO_REGION_RANGE` at the largest persistence gap);
-    `checked` gives `DEFAULT_REGIONS` when nothing is asked."""
+    """The cut asked of a hierarchy: a threshold of a measure, a region count, or
+    ``auto`` (the count in `AUTO_REGION_RANGE` at the largest gap between the
+    measure's extinctions); `checked` gives `DEFAULT_REGIONS` when nothing is asked.
 
-    min_persistence: float | None
+    `measure` is one of `volseg.morse.MEASURES` (DESIGN.md section 12); the
+    persistence measure's threshold is `min_persistence`.
+    """
+
+    threshold: float | None
     n_regions: int | None
     auto: bool
+    measure: str = "persistence"
+    min_component: float = 0.0
 
     @classmethod
-    def checked(cls, min_persistence=None, n_regions=None) -> CutRequest:
+    def checked(cls, min_persistence=None, n_regions=None, *, measure=None,
+                threshold=None, min_component=0.0) -> CutRequest:
+        """The checked cut; `measure` None: persistence when `min_persistence` is
+        given, else `DEFAULT_MEASURE`."""
+        if measure is None:
+            measure = "persistence" if min_persistence is not None else DEFAULT_MEASURE
         auto = isinstance(n_regions, str) and n_regions == "auto"
-        min_persistence, n_regions = check_cut(min_persistence, None if auto else n_regions)
-        if min_persistence is None and n_regions is None and not auto:
+        threshold, n_regions, measure = check_measure_cut(
+            min_persistence, None if auto else n_regions, measure, threshold)
+        if threshold is None and n_regions is None and not auto:
             n_regions = DEFAULT_REGIONS
-        return cls(min_persistence, n_regions, auto)
+        return cls(threshold, n_regions, auto, measure, _validate.share(min_component,
+                                                                        "min_component"))
+
+    @property
+    def min_persistence(self) -> float | None:
+        """The threshold of a persistence cut (None for another measure)."""
+        return self.threshold if self.measure == "persistence" else None
+
+    def of(self, hierarchy: MorseHierarchy) -> dict:
+        """The keyword arguments of ``hierarchy.segment`` / ``region_of_maximum`` for
+        this cut, the ``auto`` count chosen on `hierarchy`."""
+        n_regions = (hierarchy.largest_gap(AUTO_REGION_RANGE, self.measure) if self.auto
+                     else self.n_regions)
+        return {"n_regions": n_regions, "measure": self.measure, "threshold": self.threshold,
+                "min_component": self.min_component if hierarchy.mask is not None else 0.0}
 
 
 @dataclass(frozen=True)
@@ -177,15 +227,34 @@ class SegmentRequest:
     padding: str
     mask: object
     smooth_sigma: float
+    smooth_rule: str = "given"
 
     @classmethod
     def checked(cls, *, operator="weighted", min_persistence=None, n_regions=None,
                 value_scale=None, spacing=None, default_spacing=(1.0, 1.0, 1.0),
-                padding="linear", mask=None, smooth_sigma=0.0) -> SegmentRequest:
-        return cls(get_operator(operator), CutRequest.checked(min_persistence, n_regions),
+                padding="linear", mask=None, smooth_sigma=0.0, measure=None,
+                threshold=None, min_component=None, dtype=None) -> SegmentRequest:
+        cut = CutRequest.checked(
+            min_persistence, n_regions, threshold=threshold, measure=measure,
+            min_component=DEFAULT_MIN_COMPONENT if min_component is None else min_component)
+        sigma, rule = auto_smoothing(dtype) if smooth_sigma is None else (
+            _validate.smooth(smooth_sigma), "given")
+        return cls(get_operator(operator), cut,
                    None if value_scale is None else _validate.value_scale(value_scale),
                    _validate.spacing(spacing, default_spacing), check_padding(padding), mask,
-                   _validate.smooth(smooth_sigma))
+                   sigma, rule)
+
+
+def auto_smoothing(dtype) -> tuple:
+    """(sigma, rule) of the default pre-smoothing for values of `dtype`:
+    `AUTO_INTEGER_SIGMA` voxels for integers of at most 16 bits (8-bit CT and MRI,
+    12-bit scanners: the curvature of their quantization steps is voxel-sized
+    noise), 0 for floats and wider integers (simulations, probability maps saved
+    as floats, statistical maps)."""
+    dtype = None if dtype is None else np.dtype(dtype)
+    if dtype is not None and dtype.kind in "biu" and dtype.itemsize <= 2:
+        return AUTO_INTEGER_SIGMA, f"auto: {dtype} values"
+    return 0.0, "auto: " + ("no dtype" if dtype is None else f"{dtype} values")
 
 
 class Storage:
@@ -251,33 +320,49 @@ def run_stages(data, request: SegmentRequest, storage: Storage | None = None
         curvature = storage.curvature(checked_grid_curvature(
             values, request.operator, request.spacing, scale, request.padding,
             block_hooks=hooks))
-    hierarchy, labels, k, threshold, cut = _morse_and_cut(
-        curvature, request.cut, timings, mask=choice.mask, storage=storage)
-    result = Segmentation(labels, curvature, hierarchy, k, request.operator.name, threshold,
-                          scale, request.spacing, timings, cut, choice, request.smooth_sigma,
-                          padding=request.padding)
+    hierarchy, labels, k, cut = _morse_and_cut(
+        curvature, request.cut, timings, mask=choice.mask, storage=storage,
+        vertex_weight=float(np.prod(request.spacing)))
+    result = Segmentation(labels, curvature, hierarchy, k, request.operator.name,
+                          value_scale=scale, spacing=request.spacing, timings=timings, cut=cut,
+                          mask=choice, smooth_sigma=request.smooth_sigma,
+                          smooth_rule=request.smooth_rule, padding=request.padding,
+                          **_cut_fields(cut))
     return result, value_range
 
 
 def _morse_and_cut(field, cut: CutRequest, timings, *, mask=None, adjacency=None,
-                   storage: Storage) -> tuple:
-    """The Morse stage and the cut: (hierarchy, labels 1..k, k, threshold, cut)."""
+                   vertex_weight=None, storage: Storage) -> tuple:
+    """The Morse stage and the cut: (hierarchy, labels 1..k, k, cut record), sizes
+    counted in `vertex_weight` per vertex (`MorseHierarchy.with_vertex_weight`)."""
     with _timed(timings, "morse"):
         hierarchy = descending_complex(field, adjacency=adjacency, mask=mask,
                                        block_hooks=storage.block_hooks)
+        if vertex_weight is not None:
+            hierarchy = hierarchy.with_vertex_weight(vertex_weight)
     with _timed(timings, "cut"):
-        n_regions = hierarchy.largest_gap(AUTO_REGION_RANGE) if cut.auto else cut.n_regions
-        region = hierarchy.region_of_maximum(cut.min_persistence, n_regions)
+        asked = cut.of(hierarchy)
+        region = hierarchy.region_of_maximum(**asked)
         labels = hierarchy.relabel(region)
         if hierarchy.mask is None:
             labels += 1  # regions 1..k; 0 is kept for voxels outside a mask
         k = int(region.max()) + 1
     with _timed(timings, "labels"):
         labels = storage.labels(labels, k)
-    threshold = (float(cut.min_persistence) if cut.min_persistence is not None
-                 else hierarchy.threshold_for(k))
-    asked = {"min_persistence": cut.min_persistence, "n_regions": n_regions, "auto": cut.auto}
-    return hierarchy, labels, k, threshold, asked
+    threshold = (float(cut.threshold) if cut.threshold is not None
+                 else hierarchy.threshold_for(k, cut.measure))
+    record = {"measure": cut.measure, "threshold": cut.threshold,
+              "min_persistence": cut.min_persistence, "n_regions": asked["n_regions"],
+              "auto": cut.auto, "cut_threshold": threshold,
+              "min_component": asked["min_component"]}
+    return hierarchy, labels, k, record
+
+
+def _cut_fields(record) -> dict:
+    """The `Segmentation` fields of a cut record of `_morse_and_cut`."""
+    threshold = record["cut_threshold"]
+    return {"min_persistence": threshold if record["measure"] == "persistence" else None,
+            "measure": record["measure"], "threshold": threshold}
 
 
 @contextmanager
@@ -305,8 +390,11 @@ def segment_volume(
     value_scale: float | None = None,
     spacing=None,
     padding: str = "linear",
-    mask=None,
-    smooth_sigma: float = 0.0,
+    mask="auto",
+    smooth_sigma: float | None = None,
+    measure: str | None = None,
+    threshold: float | None = None,
+    min_component: float | None = None,
     smooth: float | None = None,
     boundary: str | None = None,
 ) -> Segmentation:
@@ -337,12 +425,28 @@ def segment_volume(
     mask : bool ndarray, str or None
         The voxels the Morse stage segments (`volseg.masks.foreground_mask`: None,
         ``'auto'``, ``'nonzero'``, ``'otsu'``, ``'value>T'``, or an array). The
-        curvature is always computed on the whole volume. Default None: every voxel.
-    smooth_sigma : float
+        curvature is always computed on the whole volume. Default ``'auto'`` (the
+        command line's): a plateau or a low-mode background is left out, else
+        every voxel; None segments every voxel.
+    smooth_sigma : float, optional
         Standard deviation in voxels of a Gaussian applied to the values before the
         curvature (0: none, the values as they are). Tames the checkerboard that
         8-bit quantization gives the curvature; features smaller than about
-        2 `smooth_sigma` voxels vanish.
+        2 `smooth_sigma` voxels vanish. Default `auto_smoothing` of the volume's
+        type: `AUTO_INTEGER_SIGMA` for integers of at most 16 bits, else 0.
+    measure : {'persistence', 'size', 'hypervolume'}, optional
+        What decides which regions survive the cut (DESIGN.md section 12;
+        default `DEFAULT_MEASURE`): ``persistence`` keeps the tallest peaks of the
+        curvature, ``size`` the largest regions (Carr et al. 2004: the smallest
+        region merges across its highest saddle until `n_regions` are left),
+        ``hypervolume`` weighs size by height.
+    threshold : float, optional
+        Instead of a count, merge every region whose `measure` is below it (for
+        ``size``, in world units: voxels times the voxel volume).
+    min_component : float, optional
+        With a mask: its connected components (in the Morse graph's connectivity)
+        holding less than this share of the masked voxels are labelled 0 and take
+        no region of `n_regions` (default `DEFAULT_MIN_COMPONENT`; 0 keeps all).
     smooth, boundary
         Deprecated names of `smooth_sigma` and `padding`.
 
@@ -350,7 +454,7 @@ def segment_volume(
     -------
     Segmentation
     """
-    smooth_sigma = _validate.renamed(smooth_sigma, smooth, "smooth_sigma", "smooth", 0.0)
+    smooth_sigma = _validate.renamed(smooth_sigma, smooth, "smooth_sigma", "smooth", None)
     padding = _validate.renamed(padding, boundary, "padding", "boundary", "linear")
     data = getattr(volume, "data", volume)
     lazy = _validate.is_lazy(data)
@@ -359,7 +463,8 @@ def segment_volume(
         operator=operator, min_persistence=min_persistence, n_regions=n_regions,
         value_scale=value_scale, spacing=spacing,
         default_spacing=getattr(volume, "spacing", (1.0, 1.0, 1.0)), padding=padding, mask=mask,
-        smooth_sigma=smooth_sigma)
+        smooth_sigma=smooth_sigma, measure=measure, threshold=threshold,
+        min_component=min_component, dtype=data.dtype)
     return run_stages(data, request)[0]
 
 
@@ -371,7 +476,10 @@ def segment_mesh(
     n_regions: int | str | None = None,
     min_persistence: float | None = None,
     boundary: str = "partial",
-    smooth_rounds: int = 0,
+    smooth_rounds: int = 10,
+    measure: str | None = None,
+    threshold: float | None = None,
+    min_component: float | None = None,
     smooth: int | None = None,
 ) -> Segmentation:
     """Segment an oriented n-manifold in R^(n+1) by the descending Morse complex of its
@@ -399,7 +507,12 @@ def segment_mesh(
         the Morse graph with label 0 and NaN curvature.
     smooth_rounds : int
         Rounds of 1-ring averaging of the curvature before the Morse stage (the
-        paper smooths estimates on irregular meshes; 0: none).
+        paper smooths estimates on irregular meshes; 0: none). Default 10, as the
+        command line: a raw marching mesh's curvature is noisy at the vertex scale.
+    measure, threshold, min_component
+        As in `segment_volume`; sizes are the vertices' volumes (a 1/(n+1) share
+        of each simplex around them); `min_component` applies to the vertices
+        segmented when some are left out (``boundary='nan'``).
     smooth
         Deprecated name of `smooth_rounds`.
 
@@ -418,12 +531,14 @@ def segment_mesh(
     from . import mesh as _mesh
     from .curvature import vertex_curvature
 
-    smooth_rounds = _validate.renamed(smooth_rounds, smooth, "smooth_rounds", "smooth", 0)
+    smooth_rounds = _validate.renamed(smooth_rounds, smooth, "smooth_rounds", "smooth", 10)
     entry = get_operator(operator)
     if boundary not in ("partial", "nan"):
         raise ValueError(f"unknown `boundary` {boundary!r}; choose 'partial' or 'nan'")
     rounds = _validate.rounds(smooth_rounds, "smooth_rounds")
-    cut = CutRequest.checked(min_persistence, n_regions)
+    cut = CutRequest.checked(
+        min_persistence, n_regions, threshold=threshold, measure=measure,
+        min_component=DEFAULT_MIN_COMPONENT if min_component is None else min_component)
     vertices, simplices = _mesh.check_mesh(vertices, simplices)
     timings = {}
     with _timed(timings, "curvature"):
@@ -432,11 +547,13 @@ def segment_mesh(
             curvature = _mesh.ring_average(curvature, simplices, rounds)
     known = np.isfinite(curvature)   # boundary vertices with 'nan', vertices in no simplex
     mask = None if known.all() else known
-    hierarchy, labels, k, threshold, cut = _morse_and_cut(
+    hierarchy, labels, k, cut = _morse_and_cut(
         np.where(known, curvature, 0.0), cut, timings, mask=mask,
-        adjacency=_mesh.edges(simplices), storage=InMemory())
+        adjacency=_mesh.edges(simplices), storage=InMemory(),
+        vertex_weight=_mesh.vertex_volumes(vertices, simplices))
     used = "all vertices" if mask is None else "vertices with a complete star"
     choice = MaskChoice(mask, boundary, used, int(known.sum()))
-    return Segmentation(labels, curvature, hierarchy, k, entry.name, threshold, None, None,
-                        timings, cut, choice, smooth_rounds=rounds, vertices=vertices,
-                        simplices=simplices)
+    return Segmentation(labels, curvature, hierarchy, k, entry.name, value_scale=None,
+                        spacing=None, timings=timings, cut=cut, mask=choice,
+                        smooth_rounds=rounds, vertices=vertices, simplices=simplices,
+                        **_cut_fields(cut))

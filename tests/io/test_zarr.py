@@ -203,7 +203,7 @@ def test_cli_blockwise_checks_the_free_disk_first(tmp_path, volume, capsys, monk
         monkeypatch.setattr(shutil, "disk_usage", lambda path: real(path)._replace(free=n))
 
     free(need - 1)
-    assert main(["segment", str(tmp_path / "vol.zarr"), "-o", str(out), "-q"]) == 2
+    assert main(["segment", str(tmp_path / "vol.zarr"), "-o", str(out), "-q", "--smooth", "0"]) == 2
     err = capsys.readouterr().err
     assert "GB free, but the blockwise run's work folder needs" in err and err.count("\n") == 1
     assert os.listdir(out) == []                       # nothing written, not even the work folder
@@ -214,7 +214,7 @@ def test_cli_blockwise_checks_the_free_disk_first(tmp_path, volume, capsys, monk
     (out / ".vol.volseg-work").mkdir()
     (out / ".vol.volseg-work" / "left.npz").write_bytes(b"x" * 1000)
     free(need - 1000)
-    assert main(["segment", str(tmp_path / "vol.zarr"), "-o", str(out)]) == 0
+    assert main(["segment", str(tmp_path / "vol.zarr"), "-o", str(out), "--smooth", "0"]) == 0
     err = capsys.readouterr().err
     assert "warning" in err and "GB free; the run may need up to" in err   # outputs may not fit
     assert sorted(p for p in os.listdir(out) if not p.startswith(".")) == [

@@ -10,7 +10,9 @@ fields. The package:
 - `_build`: the in-memory build (`descending_complex`), `_edges` and `_kernels` its
   cross-cell edges and compiled passes;
 - `_blocks` (with `_block_kernels`): the same build on a Dask array, block by block;
-- `_hierarchy`: `MorseHierarchy`, every cut of it without recomputation.
+- `_hierarchy`: `MorseHierarchy`, every cut of it without recomputation;
+- `_measures` and `_prune`: the size measures of DESIGN.md section 12 (per-cell sizes
+  and hypervolumes, the Carr et al. pruning over the merge events).
 
 DESIGN.md section 5 is the contract:
 
@@ -45,6 +47,8 @@ from __future__ import annotations
 
 from ._build import descending_complex
 from ._graph import grid_offsets
-from ._hierarchy import MorseHierarchy, check_cut
+from ._hierarchy import MorseHierarchy, check_cut, check_measure_cut
+from ._measures import MEASURES
 
-__all__ = ["descending_complex", "MorseHierarchy", "grid_offsets", "check_cut"]
+__all__ = ["descending_complex", "MorseHierarchy", "grid_offsets", "check_cut",
+           "check_measure_cut", "MEASURES"]

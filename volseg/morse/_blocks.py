@@ -300,13 +300,13 @@ def dask_descending_complex(field, connectivity="kuhn", mask=None, hooks=None):
     forests = [_Forest(*f) for f in _gather(
         pairs, hooks.compute, "Morse: cross-cell edges and spanning forest per block")]
     phases.done("blocks: cells and cross-cell edges")
-    young, elder, target, saddle, saddle_values = _union_find(
+    young, elder, target, source, saddle, saddle_values = _union_find(
         forests, len(maxima.gids), maxima.index_type)
     del forests
     phases.done("client: saddle order, union-find")
     return MorseHierarchy(
         shape=tuple(int(s) for s in grid.shape), cells=cells, maxima=maxima.gids,
-        values=maxima.values, young=young, elder=elder, target=target, saddle=saddle,
+        values=maxima.values, young=young, elder=elder, target=target, source=source, saddle=saddle,
         saddle_value=saddle_values, mask=mask, _field=field, _connectivity=connectivity,
         timings=phases.times)
 
@@ -390,7 +390,8 @@ def _union_find(forests: list, n_maxima: int, index_type) -> tuple:
     forest, so Kruskal over it in the in-memory order makes the in-memory merges (a
     pair found by two blocks: the lower edge is skipped). Joined one column at a
     time, each block's copy dropped as it goes (the peak is one column more than the
-    edges, not twice the edges). Returns (young, elder, target, saddle, saddle value)."""
+    edges, not twice the edges). Returns (young, elder, target, source, saddle, saddle
+    value)."""
     edge_a, edge_b, edge_v, edge_f = (_joined(forests, k) for k in ("a", "b", "saddle", "value"))
     edge_a, edge_b = edge_a.astype(index_type, copy=False), edge_b.astype(index_type, copy=False)
     order = _saddle_order(edge_f, edge_v, edge_a, edge_b)
@@ -400,14 +401,14 @@ def _union_find(forests: list, n_maxima: int, index_type) -> tuple:
     edge_f = edge_f[order]
     del order
     out = [np.empty(max(n_maxima - 1, 0), dtype=t)
-           for t in (np.int32, np.int32, np.int32, np.int64)]
+           for t in (np.int32, np.int32, np.int32, np.int32, np.int64)]
     # Kruskal records each event's edge (its index in place of a saddle): the events'
     # saddles and their values are then two gathers.
     edge = np.arange(len(edge_a), dtype=index_type if len(edge_a) < 2**31 - 1 else np.int64)
     n_events = _kernels.kruskal(edge_a, edge_b, edge, n_maxima, *out)
     del edge_a, edge_b, edge
-    young, elder, target, event_edge = (x[:n_events].copy() for x in out)
-    return young, elder, target, edge_v[event_edge].astype(np.int64), edge_f[event_edge]
+    young, elder, target, source, event_edge = (x[:n_events].copy() for x in out)
+    return young, elder, target, source, edge_v[event_edge].astype(np.int64), edge_f[event_edge]
 
 
 def _joined(parts, name: str):

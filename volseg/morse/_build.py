@@ -41,11 +41,13 @@ def _descending_cells(graph: _Neighbourhood, phases: _Phases):
 @dataclass
 class _MergeEvents:
     """Elder-rule merges, in sweep order: `young` dies into `elder`'s component at the
-    saddle node `saddle`; `target` is the cell across the saddle edge."""
+    saddle node `saddle`; `target` and `source` are the cells of the saddle edge on the
+    elder's and on the young's side."""
 
     young: NDArray[np.int32]
     elder: NDArray[np.int32]
     target: NDArray[np.int32]
+    source: NDArray[np.int32]
     saddle: NDArray[np.int64]
 
 
@@ -61,7 +63,7 @@ def _merge_events(graph: _Neighbourhood, cell, n_maxima,
     kernels.gather(order, edge_a, edge_b, edge_v, *sorted_edges)
     del order, edge_a, edge_b, edge_v
     out = [np.empty(max(n_maxima - 1, 0), dtype=t)
-           for t in (np.int32, np.int32, np.int32, np.int64)]
+           for t in (np.int32, np.int32, np.int32, np.int32, np.int64)]
     n_events = kernels.kruskal(*sorted_edges, n_maxima, *out)
     phases.done("union-find")
     return _MergeEvents(*(a[:n_events].copy() for a in out))
@@ -135,6 +137,7 @@ def descending_complex(field: ArrayLike, *, adjacency=None, connectivity="kuhn",
         young=events.young,
         elder=events.elder,
         target=events.target,
+        source=events.source,
         saddle=saddles,
         saddle_value=values.ravel()[saddles],
         mask=mask,

@@ -3,6 +3,7 @@ recomputation; `check_cut`, the checked request of a cut."""
 
 from __future__ import annotations
 
+import dataclasses
 import warnings
 from dataclasses import dataclass
 from dataclasses import field as dataclass_field
@@ -10,13 +11,14 @@ from dataclasses import field as dataclass_field
 import numpy as np
 from numpy.typing import NDArray
 
-from . import _kernels
+from . import _kernels, _measures, _prune
 from ._graph import grid_offsets
+from ._measures import check_measure
 
-__all__ = ["MorseHierarchy", "check_cut"]
+__all__ = ["MorseHierarchy", "check_cut", "check_measure_cut"]
 
 
-def check_cut(min_persistence=None, n_regions=None) -> tuple:
+def check_cut(min_persistence=None, n_regions=None, *, name="min_persistence") -> tuple:
     """The checked cut of a hierarchy, ``(min_persistence, n_regions)``, at most one given.
 
     `n_regions` must be a positive integer (not a float or a bool); `min_persistence`
@@ -25,7 +27,7 @@ def check_cut(min_persistence=None, n_regions=None) -> tuple:
     import numbers
 
     if min_persistence is not None and n_regions is not None:
-        raise ValueError("give `min_persistence` or `n_regions`, not both")
+        raise ValueError(f"give `{name}` or `n_regions`, not both")
     if n_regions is not None:
         if isinstance(n_regions, bool) or not isinstance(n_regions, numbers.Integral):
             raise ValueError(f"`n_regions` must be an integer, got {n_regions!r}")
@@ -36,13 +38,33 @@ def check_cut(min_persistence=None, n_regions=None) -> tuple:
         try:
             value = float(min_persistence)
         except (TypeError, ValueError):
-            raise ValueError("`min_persistence` must be a number, got "
+            raise ValueError(f"`{name}` must be a number, got "
                              f"{min_persistence!r}") from None
         if not value >= 0:  # NaN too
-            raise ValueError("`min_persistence` must be a non-negative number, got "
+            raise ValueError(f"`{name}` must be a non-negative number, got "
                              f"{min_persistence!r}")
         min_persistence = value
     return min_persistence, n_regions
+
+def check_measure_cut(min_persistence=None, n_regions=None, measure="persistence",
+                      threshold=None) -> tuple:
+    """The checked cut by a measure, ``(threshold, n_regions, measure)``.
+
+    `min_persistence` is the persistence measure's `threshold` (give one of them);
+    a size measure takes `threshold`. At most one of the threshold and `n_regions`.
+    """
+    measure = check_measure(measure)
+    if min_persistence is not None:
+        if threshold is not None:
+            raise ValueError("give `threshold` or `min_persistence`, not both")
+        if measure != "persistence":
+            raise ValueError(f"`min_persistence` is a threshold of persistence; with "
+                             f"measure {measure!r} give `threshold`")
+        threshold = min_persistence
+    threshold, n_regions = check_cut(threshold, n_regions, name="threshold" if min_persistence
+                                     is None else "min_persistence")
+    return threshold, n_regions, measure
+
 
 @dataclass(eq=False)
 class MorseHierarchy:
@@ -58,10 +80,13 @@ class MorseHierarchy:
         Flat vertex index of each maximum, by decreasing value (id = position).
     values : (M,) ndarray of float
         Field value at each maximum.
-    young, elder, target : (E,) ndarray of int32
+    young, elder, target, source : (E,) ndarray of int32
         Merge events, in sweep order (decreasing saddle value): maximum ``young``
         dies into the component of ``elder`` (elder rule); its cell joins the cell
-        ``target`` across the saddle edge when simplified.
+        ``target`` across the saddle edge when simplified. ``source`` and
+        ``target`` are the cells at the two ends of that edge (young's side and
+        elder's side): the edges of the cell graph's maximum spanning forest, on
+        which the size measures prune.
     saddle : (E,) ndarray of int
         Flat vertex index of each event's saddle (the lower end of the highest edge
         crossing between the two components).
@@ -71,6 +96,10 @@ class MorseHierarchy:
         Without a mask, regions are 0..k-1.
     timings : dict
         Seconds per phase of the build (steepest ascent, path compression, ...).
+    vertex_weight : float, (V,) ndarray, or None
+        What one vertex counts in the ``size`` and ``hypervolume`` measures: None
+        for 1 (sizes in vertices), a voxel's volume for world units, a mesh's
+        vertex volumes (`with_vertex_weight`).
     """
 
     shape: tuple
@@ -80,6 +109,7 @@ class MorseHierarchy:
     young: NDArray[np.int32]
     elder: NDArray[np.int32]
     target: NDArray[np.int32]
+    source: NDArray[np.int32]
     saddle: NDArray[np.int64]
     saddle_value: NDArray[np.float64]
     mask: NDArray[np.bool_] | None
@@ -87,6 +117,22 @@ class MorseHierarchy:
     _adjacency: tuple | None = None
     _connectivity: object = None
     timings: dict = dataclass_field(default_factory=dict, repr=False)
+    vertex_weight: object = None
+    _pruned: dict = dataclass_field(default_factory=dict, repr=False)
+
+    def with_vertex_weight(self, weight) -> MorseHierarchy:
+        """The same hierarchy with sizes counted in `weight` per vertex (a positive
+        number, or one per vertex); persistence cuts are unchanged."""
+        if np.ndim(weight) == 0:
+            weight = float(weight)
+            if not (weight > 0 and np.isfinite(weight)):
+                raise ValueError(f"`weight` must be a positive number, got {weight!r}")
+        else:
+            weight = np.asarray(weight, dtype=np.float64)
+            if weight.shape != (int(np.prod(self.shape)),) or not np.all(weight >= 0):
+                raise ValueError("`weight` must hold one non-negative number per vertex "
+                                 f"({int(np.prod(self.shape))}), got shape {weight.shape}")
+        return dataclasses.replace(self, vertex_weight=weight, _pruned={})
 
     @property
     def persistence(self) -> NDArray[np.float64]:
@@ -105,14 +151,37 @@ class MorseHierarchy:
         """Connected components of the graph (regions that can never merge)."""
         return len(self.maxima) - len(self.young)
 
-    def threshold_for(self, n_regions: int) -> float:
-        """A persistence threshold whose cut has `n_regions` regions, if ties allow.
+    def extinction(self, measure: str = "persistence") -> NDArray[np.float64]:
+        """(E,) the measure at which each event merges: its persistence, or the
+        ``size`` / ``hypervolume`` of the region pruned across it (DESIGN.md section
+        12; pruned once per measure, then every cut is a lookup)."""
+        if check_measure(measure) == "persistence":
+            return self.event_persistence
+        return self._pruning(measure)[1]
 
-        The midpoint between the persistences of the last kept and the first merged
-        event; `segment(n_regions=k)` is exact even where ties make no threshold so.
+    def cell_measure(self, measure: str) -> NDArray[np.float64]:
+        """(M,) the ``size`` or ``hypervolume`` of each maximum's own cell."""
+        if check_measure(measure) == "persistence":
+            raise ValueError("persistence belongs to the events (`extinction`), not to cells")
+        return self._pruning(measure)[2]
+
+    def _pruning(self, measure):
+        if measure not in self._pruned:
+            base = _measures.cell_measures(self, measure)
+            order = np.empty(len(self.young), dtype=np.int64)
+            extinction = np.empty(len(self.young))
+            _prune.prune(self.source, self.target, len(self.maxima), base, order, extinction)
+            self._pruned[measure] = (order, extinction, base)
+        return self._pruned[measure]
+
+    def threshold_for(self, n_regions: int, measure: str = "persistence") -> float:
+        """A threshold of `measure` whose cut has `n_regions` regions, if ties allow.
+
+        The midpoint between the last kept and the first merged event's extinction;
+        `segment(n_regions=k)` is exact even where ties make no threshold so.
         """
         _, n_regions = check_cut(n_regions=n_regions)
-        p = np.sort(self.event_persistence)[::-1]
+        p = np.sort(self.extinction(measure))[::-1]
         keep = n_regions - self.n_components
         if keep <= 0:
             return float(p[0]) + 1.0 if len(p) else 0.0
@@ -120,18 +189,19 @@ class MorseHierarchy:
             return 0.0
         return 0.5 * float(p[keep - 1] + p[keep])
 
-    def regions_at(self, thresholds) -> NDArray[np.int64]:
-        """Region count of the cut at each persistence threshold (the persistence curve)."""
-        p = np.sort(self.event_persistence)
+    def regions_at(self, thresholds, measure: str = "persistence") -> NDArray[np.int64]:
+        """Region count of the cut at each threshold of `measure` (the persistence
+        curve, or the size curve)."""
+        p = np.sort(self.extinction(measure))
         return self.n_components + len(p) - np.searchsorted(p, np.asarray(thresholds), side="left")
 
-    def largest_gap(self, region_range=(20, 40)) -> int:
+    def largest_gap(self, region_range=(20, 40), measure: str = "persistence") -> int:
         """The region count k in `region_range` (inclusive) whose cut sits in the widest
-        gap between consecutive persistences, on a log scale: the most clearly
-        separated simplification. Falls back to the range's ends when the hierarchy
-        has fewer maxima."""
+        gap between consecutive extinctions of `measure`, on a log scale: the most
+        clearly separated simplification. Falls back to the range's ends when the
+        hierarchy has fewer maxima."""
         lo, hi = (int(r) for r in region_range)
-        p = np.sort(self.event_persistence)[::-1]
+        p = np.sort(self.extinction(measure))[::-1]
         best, best_gap = None, -np.inf
         for k in range(max(lo, self.n_components), hi + 1):
             keep = k - self.n_components
@@ -144,50 +214,114 @@ class MorseHierarchy:
             return max(min(hi, len(self.maxima)), 1)
         return best
 
-    def _merged_events(self, min_persistence, n_regions):
-        p = self.event_persistence
-        min_persistence, n_regions = check_cut(min_persistence, n_regions)
+    def component_of_maximum(self) -> NDArray[np.int32]:
+        """(M,) the connected component of the graph (of the mask) of each maximum,
+        numbered by its highest maximum: the regions of the cut that merges all."""
+        if "components" not in self._pruned:
+            region = np.empty(len(self.maxima), dtype=np.int32)
+            _kernels.regions_of_cut(self.young, self.target, np.ones(len(self.young), bool),
+                                    region)
+            self._pruned["components"] = region
+        return self._pruned["components"]
+
+    def small_components(self, min_share: float) -> NDArray[np.bool_]:
+        """(M,) True for the maxima of components holding less than `min_share` of the
+        vertices that took part (of their weight, with `vertex_weight`)."""
+        if not 0 <= min_share < 1:
+            raise ValueError(f"`min_component` must be a share in [0, 1), got {min_share!r}")
+        component = self.component_of_maximum()
+        if min_share == 0 or self.n_components == 1:
+            return np.zeros(len(self.maxima), dtype=bool)
+        sizes = np.bincount(component, weights=self.cell_measure("size"))
+        return (sizes < min_share * sizes.sum())[component]
+
+    def _merged_events(self, min_persistence, n_regions, measure, threshold, dropped):
+        threshold, n_regions, measure = check_measure_cut(min_persistence, n_regions,
+                                                          measure, threshold)
+        gone = dropped[self.young]           # the events inside a dropped component
+        keep = None
         if n_regions is not None:
+            components = self.n_components - len(np.unique(self.component_of_maximum()[dropped]))
             if n_regions > len(self.maxima):
                 warnings.warn(
                     f"asked for {n_regions} regions but the field has only "
                     f"{len(self.maxima)} maxima; returning all of them", stacklevel=3)
-            elif n_regions < self.n_components:
+            elif n_regions < components:
                 warnings.warn(
-                    f"asked for {n_regions} regions but the graph has {self.n_components} "
+                    f"asked for {n_regions} regions but the graph has {components} "
                     "connected components; returning one region per component", stacklevel=3)
-            return _all_but_most_persistent(p, self.young, max(n_regions - self.n_components, 0))
-        return p < (0.0 if min_persistence is None else min_persistence)
+            keep = max(n_regions - components, 0)
+        if measure == "persistence":
+            p = np.where(gone, -np.inf, self.event_persistence)
+            if keep is not None:
+                return _all_but_most_persistent(p, self.young, keep)
+            return gone | (p < (0.0 if threshold is None else threshold))
+        order, extinction, _ = self._pruning(measure)
+        if keep is None:
+            return gone | (extinction < (0.0 if threshold is None else threshold))
+        order = order[~gone[order]]
+        merged = gone.copy()
+        merged[order[:max(len(order) - keep, 0)]] = True
+        return merged
 
-    def region_of_maximum(self, min_persistence=None, n_regions=None) -> NDArray[np.int32]:
+    def region_of_maximum(self, min_persistence=None, n_regions=None, *,
+                          measure="persistence", threshold=None,
+                          min_component=0.0) -> NDArray[np.int32]:
         """(M,) region label of each maximum for a cut (see `segment`): the maxima
         joined by the merged events, regions numbered by their highest maximum (a
-        compiled union-find: 8 M maxima take a few hundred ms and a few bytes each)."""
-        merged = self._merged_events(min_persistence, n_regions)
+        compiled union-find: 8 M maxima take a few hundred ms and a few bytes each);
+        -1 for the maxima of a dropped component (`min_component`)."""
+        dropped = self.small_components(min_component)
+        merged = self._merged_events(min_persistence, n_regions, measure, threshold, dropped)
         region = np.empty(len(self.maxima), dtype=np.int32)
-        _kernels.regions_of_cut(self.young, self.target, merged, region)
+        # Persistence joins each young maximum to its target (as it always has: every
+        # cell of its component at its death is a lower-persistence event, merged
+        # too); a size measure joins the two ends of the saddle edge.
+        young = self.young if check_measure(measure) == "persistence" else self.source
+        _kernels.regions_of_cut(young, self.target, merged, region)
+        if dropped.any():
+            kept = np.unique(region[~dropped])         # consecutive again, in order
+            region = np.searchsorted(kept, region).astype(np.int32)
+            region[dropped] = -1
         return region
 
-    def segment(self, min_persistence: float | None = None, n_regions: int | None = None):
+    def segment(self, min_persistence: float | None = None, n_regions: int | None = None, *,
+                measure: str = "persistence", threshold: float | None = None,
+                min_component: float = 0.0):
         """Labels of a cut of the hierarchy: no recomputation, one gather per vertex.
 
         Parameters
         ----------
         min_persistence : float, optional
             Merge every maximum with persistence below it (default 0: the
-            unsimplified complex).
+            unsimplified complex); the same as ``threshold`` with the persistence
+            measure.
         n_regions : int, optional
             Instead, exactly this many regions: the ``n_regions - 1`` most
-            persistent non-global maxima stay (ties broken by maximum value). Fewer
+            persistent non-global maxima stay (ties broken by maximum value), or the
+            regions left when the pruning by `measure` reaches that count. Fewer
             maxima than asked: all of them, with a warning.
+        measure : {'persistence', 'size', 'hypervolume'}
+            What decides which regions survive (DESIGN.md section 12). ``size`` and
+            ``hypervolume`` prune as Carr et al. (2004): the region of least measure
+            merges across its highest saddle, its measure added to its neighbour's.
+        threshold : float, optional
+            Merge every region whose `measure` is below it when its turn comes (the
+            events whose `extinction` is below it).
+        min_component : float
+            With a mask: the connected components of the mask holding less than
+            this share of its vertices are labelled 0 and take no region of
+            `n_regions` (default 0: none dropped).
 
         Returns
         -------
         ndarray of int32, `shape`
             Consecutive labels 0..k-1, ordered by decreasing maximum value; with a
-            mask, 0 outside it and regions 1..k.
+            mask, 0 outside it and regions 1..k. Every region is connected.
         """
-        return self.relabel(self.region_of_maximum(min_persistence, n_regions))
+        return self.relabel(self.region_of_maximum(min_persistence, n_regions, measure=measure,
+                                                   threshold=threshold,
+                                                   min_component=min_component))
 
     def relabel(self, region):
         """Labels of every vertex from the region of each maximum (the result of
@@ -291,7 +425,11 @@ def _all_but_most_persistent(p, young, keep):
 
 def _with_outside(region, mask):
     """The relabelling table of a cut: `region` without a mask; with one, regions
-    1..k and a last entry 0 for the cells of -1 (outside the mask)."""
+    1..k and a last entry 0 for the cells of -1 (outside the mask) and for the regions
+    -1 (dropped components)."""
     if mask is None:
+        if region.size and region.min() < 0:
+            raise ValueError("only a hierarchy with a mask can drop components "
+                             "(`min_component`): label 0 is outside the mask")
         return region
     return np.concatenate([region + 1, np.zeros(1, dtype=region.dtype)])

@@ -124,14 +124,16 @@ def gather(order, edge_a, edge_b, edge_v, out_a, out_b, out_v):
 
 
 @numba.njit(cache=True, nogil=True)
-def kruskal(edge_a, edge_b, edge_v, n_max, ev_young, ev_elder, ev_target, ev_saddle):
+def kruskal(edge_a, edge_b, edge_v, n_max, ev_young, ev_elder, ev_target, ev_source,
+            ev_saddle):
     """Elder-rule merges over cross-cell edges sorted by increasing saddle: the last
     (highest saddle) first.
 
     Maximum ids are by decreasing value, so a component's root is its lowest id.
     Event e: maximum ev_young[e] dies into the component of ev_elder[e] at vertex
-    ev_saddle[e]; ev_target[e] is the cell of the edge's pair on the elder's side.
-    Returns the number of events.
+    ev_saddle[e]; ev_target[e] and ev_source[e] are the cells of the edge's pair on
+    the elder's and on the young's side (the events' pairs are the edges of the cell
+    graph's maximum spanning forest). Returns the number of events.
     """
     parent = np.arange(n_max)
     n_ev = 0
@@ -143,12 +145,13 @@ def kruskal(edge_a, edge_b, edge_v, n_max, ev_young, ev_elder, ev_target, ev_sad
         if ra == rb:
             continue
         if ra < rb:
-            young, elder, target = rb, ra, ca
+            young, elder, target, source = rb, ra, ca, cb
         else:
-            young, elder, target = ra, rb, cb
+            young, elder, target, source = ra, rb, cb, ca
         ev_young[n_ev] = young
         ev_elder[n_ev] = elder
         ev_target[n_ev] = target
+        ev_source[n_ev] = source
         ev_saddle[n_ev] = edge_v[e]
         n_ev += 1
         parent[young] = elder

@@ -75,13 +75,17 @@ def result_summary(result) -> dict:
     from ..metrics import region_spread
 
     regions = result.region_table()
+    measure = result.measure
     return {
         "operator": result.operator,
         "n_regions": result.n_regions,
-        "cut": "auto: the largest persistence gap for 20-40 regions" if result.cut.get("auto")
-        else ("persistence threshold" if result.cut.get("min_persistence") is not None
+        "cut": f"auto: the largest {measure} gap for 20-40 regions" if result.cut.get("auto")
+        else (f"{measure} threshold" if result.cut.get("threshold") is not None
               else "region count"),
+        "measure": measure,
+        "threshold": result.threshold,
         "min_persistence": result.min_persistence,
+        "min_component": result.cut.get("min_component", 0.0),
         "n_maxima": int(len(result.hierarchy.maxima)),
         "persistence": {
             "components": result.hierarchy.n_components,
@@ -119,6 +123,7 @@ def summary(result, *, name, source=None, checksum=None, files=(), frame: Frame 
         "noise_percent": noise or 0.0,
         "seed": seed if noise else None,
         "smooth_sigma_voxels": result.smooth_sigma,
+        "smooth_rule": result.smooth_rule,
         "padding": result.padding,
         "mask": result.mask.describe(),
         "labels": "0 outside the mask, regions 1..k",
@@ -152,7 +157,10 @@ def degenerate_cut_warning(name: str, result, spread: dict, dtype) -> str | None
     what = (f"{name}: the largest of {result.n_regions} regions holds "
             f"{100 * spread['largest_share']:.1f} % of the labelled voxels and only "
             f"{spread['regions_at_least_1_percent']} hold 1 % or more")
-    if result.smooth_sigma == 0 and np.dtype(dtype).kind in "biu":
+    if result.measure == "persistence":
+        fix = ("the most persistent curvature peaks are voxel-sized spikes; try --measure "
+               "hypervolume (or size)" + (", --smooth 1" if result.smooth_sigma == 0 else ""))
+    elif result.smooth_sigma == 0 and np.dtype(dtype).kind in "biu":
         fix = ("on integer data the quantization steps dominate the curvature; "
                "try --smooth 1 or 2")
     elif result.smooth_sigma == 0:

@@ -35,7 +35,7 @@ def write_result_files(paths: dict, result, values, info: dict, *, frame: Frame 
     arrays = {"labels": lambda: result.labels.astype(label_type),
               "curvature": lambda: result.curvature.astype(np.float32)}
     hierarchy = result.hierarchy
-    curve = (hierarchy.event_persistence, hierarchy.n_components, result.min_persistence)
+    curve = (hierarchy.extinction(result.measure), hierarchy.n_components, result.threshold)
     # The writers run at once (zlib releases the GIL).
     with ThreadPoolExecutor(3) as pool:
         jobs = [pool.submit(_write_array, Path(paths[key]), arrays[kind], frame)
@@ -43,9 +43,10 @@ def write_result_files(paths: dict, result, values, info: dict, *, frame: Frame 
                 if key in paths and not Path(paths[key]).exists()]
         jobs.append(pool.submit(write_preview, paths["preview"], values, result.curvature,
                                 result.labels, title=title, persistence=curve,
-                                value_range=value_range, n_labels=k))
+                                value_range=value_range, n_labels=k, measure=result.measure))
         if "persistence" in paths:
-            jobs.append(pool.submit(write_persistence_plot, paths["persistence"], *curve, k))
+            jobs.append(pool.submit(write_persistence_plot, paths["persistence"], *curve, k,
+                                    measure=result.measure))
         for job in jobs:
             job.result()
     Path(paths["summary"]).write_text(_json.dumps(info, indent=2))

@@ -74,15 +74,17 @@ def _log_ticks(lo, hi):
 
 
 def persistence_panel(persistence, n_components, threshold, n_regions, *, width=_BOX * 3 + 2 * _GAP,
-                      height=190):
-    """An RGB image of the persistence curve: regions of the cut against the threshold
-    (log x, log y), the chosen cut marked. Read it to choose `--min-persistence`:
-    a long flat step is a threshold range over which the segmentation is stable.
+                      height=190, measure="persistence"):
+    """An RGB image of the persistence curve (or the curve of another `measure`):
+    regions of the cut against the threshold (log x, log y), the chosen cut marked.
+    Read it to choose `--min-persistence` (`--threshold`): a long flat step is a
+    threshold range over which the segmentation is stable.
 
     Parameters
     ----------
     persistence : (E,) array of float
-        Persistence of every merge event (`MorseHierarchy.event_persistence`).
+        The extinction of every merge event in `measure`
+        (`MorseHierarchy.extinction`; the persistence by default).
     n_components : int
         Regions that never merge (one per connected component of the graph).
     threshold : float
@@ -96,8 +98,9 @@ def persistence_panel(persistence, n_components, threshold, n_regions, *, width=
     draw = ImageDraw.Draw(canvas)
     small, medium = _font(11), _font(13)
     left, right, top, bottom = 62, 18, 24, 40
-    draw.text((width // 2, 4), "persistence curve: regions of the cut at each threshold "
-              "(choose --min-persistence in a long flat step)", fill=_INK, font=medium, anchor="ma")
+    option = "--min-persistence" if measure == "persistence" else "--threshold"
+    draw.text((width // 2, 4), f"{measure} curve: regions of the cut at each threshold "
+              f"(choose {option} in a long flat step)", fill=_INK, font=medium, anchor="ma")
     if len(p) == 0:
         draw.text((width // 2, height // 2), "no merge events: a single maximum per component",
                   fill=_INK, font=small, anchor="mm")
@@ -115,7 +118,7 @@ def persistence_panel(persistence, n_components, threshold, n_regions, *, width=
         return height - bottom - np.log10(r) / max(np.log10(y_hi), 1e-9) * (height - top - bottom)
 
     box = (left, top, width - right, height - bottom)
-    _curve_axes(draw, box, (x_lo, x_hi, y_hi), x_of, y_of, small, width)
+    _curve_axes(draw, box, (x_lo, x_hi, y_hi), x_of, y_of, small, width, measure)
     xs, ys = _curve_corners(p[::-1], x_of, y_of, (x_lo, x_hi, y_hi), n_components)
     draw.line(list(zip(xs.tolist(), ys.tolist(), strict=True)), fill=(31, 119, 180), width=2)
     if threshold > 0 and x_lo < threshold < x_hi:
@@ -128,7 +131,7 @@ def persistence_panel(persistence, n_components, threshold, n_regions, *, width=
     return np.asarray(canvas)
 
 
-def _curve_axes(draw, box, limits, x_of, y_of, font, width):
+def _curve_axes(draw, box, limits, x_of, y_of, font, width, measure="persistence"):
     """The frame, the log ticks and the axis names of the persistence curve."""
     left, top, right, bottom = box
     x_lo, x_hi, y_hi = limits
@@ -143,7 +146,7 @@ def _curve_axes(draw, box, limits, x_of, y_of, font, width):
             y = y_of(r)
             draw.line([left - 4, y, left, y], fill=_INK)
             draw.text((left - 6, y), str(r), fill=_INK, font=font, anchor="rm")
-    draw.text((width // 2, bottom + 26), "persistence threshold (log)", fill=_INK, font=font,
+    draw.text((width // 2, bottom + 26), f"{measure} threshold (log)", fill=_INK, font=font,
               anchor="ma")
     draw.text((6, top - 12), "regions (log)", fill=_INK, font=font)
 
@@ -178,12 +181,13 @@ def _curve_corners(ascending, x_of, y_of, limits, n_components) -> tuple:
     return np.concatenate(xs), np.concatenate(ys)
 
 
-def write_persistence_plot(path, persistence, n_components, threshold, n_regions) -> Path:
+def write_persistence_plot(path, persistence, n_components, threshold, n_regions, *,
+                           measure="persistence") -> Path:
     """The persistence curve alone, as PNG (see `persistence_panel`)."""
     from PIL import Image
 
-    Image.fromarray(persistence_panel(persistence, n_components, threshold, n_regions)).save(
-        path, format="PNG")
+    Image.fromarray(persistence_panel(persistence, n_components, threshold, n_regions,
+                                      measure=measure)).save(path, format="PNG")
     return Path(path)
 
 
@@ -221,10 +225,10 @@ def _colour_bar(canvas, draw, x, y, width, colours, ticks, label, font):
 
 
 def write_preview(path, volume, curvature, labels, *, title="", persistence=None,
-                  value_range=None, n_labels=None) -> Path:
+                  value_range=None, n_labels=None, measure="persistence") -> Path:
     """Mid slices along x, y, z: the volume, its curvature, the labels over the volume,
-    and (given ``persistence=(event_persistence, n_components, threshold)``) the
-    persistence curve below them.
+    and (given ``persistence=(extinction, n_components, threshold)``) the curve of
+    the cut's `measure` below them.
 
     Written to `path` as PNG (the caller handles atomic renaming). Labels are 1..k
     (0, outside a mask, is left uncoloured); region colours cycle through the 20
@@ -250,7 +254,7 @@ def write_preview(path, volume, curvature, labels, *, title="", persistence=None
     height = _TOP + sum(heights) + 3 * _GAP + 62
     curve = None
     if persistence is not None:
-        curve = persistence_panel(*persistence, k)
+        curve = persistence_panel(*persistence, k, measure=measure)
         height += curve.shape[0] + 12
     canvas = Image.new("RGB", (width, height), _BACKGROUND)
     draw = ImageDraw.Draw(canvas)

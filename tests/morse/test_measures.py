@@ -1,0 +1,180 @@
+"""Size-aware cuts of the hierarchy (DESIGN.md section 12): the pruning against a
+naive one on the whole cell graph, the measures against their definitions, blockwise
+equal to in memory, persistence unchanged, small mask components dropped."""
+
+import hashlib
+
+import dask.array as da
+import numpy as np
+import pytest
+from scipy import ndimage
+
+from volseg.morse import descending_complex, grid_offsets
+
+
+def _naive_pruning(h, base, k):
+    """Carr et al.'s pruning on the whole cell graph (every pair of adjacent cells, its
+    highest saddle from `region_adjacency`), sets of cells merged one by one."""
+    graph = h.region_adjacency(h.segment())
+    offset = 0 if h.mask is None else 1          # labels 1..M with a mask
+    region = {m: m for m in range(len(h.maxima))}
+    members = {m: {m} for m in region}
+    measure = {m: base[m] for m in region}
+
+    def outgoing(r):
+        return [(graph[c + offset][n]["saddle"], n - offset) for c in members[r]
+                for n in graph[c + offset] if region[n - offset] != r]
+
+    while len(members) > k:
+        live = [r for r in members if outgoing(r)]
+        if not live:
+            break
+        r = min(live, key=lambda r: (measure[r], -r))
+        other = region[max(outgoing(r))[1]]
+        keep, gone = min(r, other), max(r, other)
+        for c in members[gone]:
+            region[c] = keep
+        members[keep] |= members.pop(gone)
+        measure[keep] = measure[r] + measure[other]
+    return np.array([region[m] for m in range(len(h.maxima))])
+
+
+def _same_partition(a, b):
+    pairs = set(zip(a.tolist(), b.tolist(), strict=True))
+    return len(pairs) == len(set(a.tolist())) == len(set(b.tolist()))
+
+
+@pytest.mark.parametrize("connectivity", ["kuhn", 6, 26])
+def test_pruning_on_the_merge_events_equals_pruning_on_the_whole_cell_graph(connectivity):
+    rng = np.random.default_rng(7)
+    for trial in range(3):
+        field = rng.random((9, 8, 7))
+        mask = None if trial != 2 else rng.random(field.shape) > 0.15
+        h = descending_complex(field, connectivity=connectivity, mask=mask)
+        for measure in ("size", "hypervolume"):
+            for k in (1, 4, 12):
+                got = h.region_of_maximum(n_regions=k, measure=measure)
+                assert _same_partition(got, _naive_pruning(h, h.cell_measure(measure), k))
+
+
+def test_measures_of_cells_follow_their_definitions():
+    rng = np.random.default_rng(3)
+    field = rng.normal(size=(12, 11, 10))
+    h = descending_complex(field)
+    cells = h.cells
+    np.testing.assert_array_equal(h.cell_measure("size"), np.bincount(cells.ravel()))
+    # Hypervolume: f - s over the cell's voxels above s, s its highest saddle with a
+    # neighbour (float reference; the measure is summed in fixed point).
+    graph = h.region_adjacency(h.segment())
+    expected = []
+    for m in range(len(h.maxima)):
+        s = max(graph[m][n]["saddle"] for n in graph[m])
+        values = field[cells == m]
+        expected.append(np.clip(values - s, 0, None).sum())
+    span = field.max() - field.min()
+    np.testing.assert_allclose(h.cell_measure("hypervolume"), expected, rtol=0,
+                               atol=span * 2.0**-32 * cells.size)
+    # World units: a voxel volume scales sizes, not the cut.
+    scaled = h.with_vertex_weight(0.5)
+    np.testing.assert_allclose(scaled.cell_measure("size"), 0.5 * h.cell_measure("size"))
+    np.testing.assert_array_equal(scaled.segment(n_regions=5, measure="size"),
+                                  h.segment(n_regions=5, measure="size"))
+
+
+def test_extinctions_never_decrease_and_thresholds_match_counts():
+    field = np.random.default_rng(11).integers(0, 6, (14, 13, 12)).astype(float)  # plateaus
+    h = descending_complex(field)
+    for measure in ("size", "hypervolume"):
+        order, extinction, _ = h._pruning(measure)
+        assert np.all(np.diff(extinction[order]) >= 0)
+        assert sorted(order.tolist()) == list(range(len(h.young)))    # every event once
+        for k in (2, 7, 30):
+            by_count = h.segment(n_regions=k, measure=measure)
+            assert by_count.max() + 1 == k
+            t = h.threshold_for(k, measure)
+            if h.regions_at([t], measure)[0] == k:      # no tie straddles the cut
+                np.testing.assert_array_equal(h.segment(threshold=t, measure=measure),
+                                              by_count)
+
+
+@pytest.mark.parametrize("connectivity", ["kuhn", 6, 26])
+def test_every_region_of_a_measure_cut_is_connected(connectivity):
+    field = np.random.default_rng(5).random((15, 14, 13))
+    h = descending_complex(field, connectivity=connectivity)
+    structure = np.zeros((3, 3, 3), bool)
+    structure[1, 1, 1] = True
+    for step in grid_offsets(3, connectivity):
+        structure[tuple(np.asarray(step) + 1)] = True
+    for measure in ("size", "hypervolume"):
+        labels = h.segment(n_regions=9, measure=measure)
+        for region in range(9):
+            assert ndimage.label(labels == region, structure)[1] == 1
+
+
+@pytest.mark.parametrize("measure", ["size", "hypervolume", "persistence"])
+def test_blockwise_measures_equal_in_memory_on_uneven_chunks(measure):
+    rng = np.random.default_rng(2)
+    field = rng.integers(0, 5, (20, 17, 13)).astype(np.float32)      # ties everywhere
+    mask = rng.random(field.shape) > 0.2
+    memory = descending_complex(field, mask=mask)
+    for chunks in ((7, 5, 6), (2, 17, 4), (20, 3, 13)):
+        blocks = descending_complex(da.from_array(field, chunks=chunks),
+                                    mask=da.from_array(mask, chunks=4))
+        if measure != "persistence":
+            np.testing.assert_array_equal(blocks.cell_measure(measure),
+                                          memory.cell_measure(measure))
+        for cut in ({"n_regions": 11}, {"threshold": 20.0},
+                    {"n_regions": 5, "min_component": 0.01}):
+            np.testing.assert_array_equal(blocks.segment(measure=measure, **cut).compute(),
+                                          memory.segment(measure=measure, **cut))
+
+
+#: sha256 (first 16 hex digits) of `segment_volume(dataset).labels` as int32 at commit
+#: f72b80a, before the size measures: persistence, no smoothing, no mask, 30 regions.
+BEFORE_MEASURES = {"fuel": "ed1a0b74a4d87695", "neghip": "9ed4e971415d0a61",
+                   "nucleon": "8177c2fde7fe3c01", "silicium": "4bbaad2d3e154dff",
+                   "tooth": "6e01c018657c6863"}
+
+
+def test_persistence_without_smoothing_or_mask_gives_the_labels_of_before(volvis_dir):
+    from volseg import segment_volume
+    from volseg.files import load_volume
+
+    for name, digest in BEFORE_MEASURES.items():
+        volume = load_volume(str(next(volvis_dir.glob(f"{name}_*.raw"))))
+        labels = segment_volume(volume, measure="persistence", smooth_sigma=0, mask=None).labels
+        got = hashlib.sha256(np.ascontiguousarray(labels, dtype=np.int32).tobytes()).hexdigest()
+        assert got[:16] == digest, name
+
+
+def test_small_mask_components_are_label_0_and_take_no_region():
+    rng = np.random.default_rng(4)
+    field = rng.random((30, 30, 30))
+    mask = np.zeros(field.shape, bool)
+    mask[2:20, 2:20, 2:20] = True                 # one large component
+    specks = rng.integers(22, 30, (12, 3))        # a few isolated voxels and pairs
+    mask[tuple(specks.T)] = True
+    h = descending_complex(field, mask=mask)
+    assert h.n_components > 1
+    dropped = h.small_components(0.001)
+    for measure in ("persistence", "size", "hypervolume"):
+        labels = h.segment(n_regions=10, measure=measure, min_component=0.001)
+        big = np.zeros_like(mask)
+        big[2:20, 2:20, 2:20] = True
+        assert ((labels > 0) == big).all() and labels.max() == 10
+        assert sorted(np.unique(labels[big])) == list(range(1, 11))
+    assert dropped.sum() == len(np.unique(h.cells[~big & mask]))
+    with pytest.raises(ValueError, match="share"):
+        h.segment(n_regions=3, min_component=1.5)
+
+
+def test_bad_measures_and_mixed_thresholds_are_refused():
+    h = descending_complex(np.random.default_rng(0).random((5, 5, 5)))
+    with pytest.raises(ValueError, match="unknown `measure`"):
+        h.segment(n_regions=3, measure="area")
+    with pytest.raises(ValueError, match="give `threshold`"):
+        h.segment(min_persistence=0.1, measure="size")
+    with pytest.raises(ValueError, match="`threshold` must be a non-negative number"):
+        h.segment(threshold=-1.0, measure="size")
+    with pytest.raises(ValueError, match="not both"):
+        h.segment(threshold=1.0, n_regions=2, measure="size")
