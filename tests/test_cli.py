@@ -179,3 +179,20 @@ def test_a_degenerate_cut_is_one_warning_line_with_its_fix(volvis_dir, tmp_path,
         spread = json.loads((tmp_path / "b" / "tooth_summary.json").read_text())["spread"]
         assert not spread["degenerate"] and spread["largest_share"] < 0.5
         assert spread["regions_at_least_1_percent"] >= 10
+
+
+def test_measure_threshold_and_min_component_options(tmp_path, capsys):
+    out = tmp_path / "o"
+    assert main(["segment", "silicium", "-o", str(out), "-q", "--json", "--measure", "size",
+                 "--threshold", "2000", "--min-component", "0", "--mask", "none"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert (summary["measure"], summary["threshold"], summary["min_component"]) == (
+        "size", 2000.0, 0.0)
+    assert summary["cut"] == "size threshold" and summary["smooth_rule"] == "auto: uint8 values"
+    # One component (no mask): every region that is left holds at least the threshold.
+    assert min(r["size"] for r in summary["regions"]) >= 2000 and summary["n_regions"] > 1
+    for argv, message in ((["--measure", "size", "--min-persistence", "1"], "--threshold"),
+                          (["--threshold", "-1"], "--threshold must be"),
+                          (["--min-component", "1.5"], "--min-component must be")):
+        assert main(["segment", "silicium", "-o", str(tmp_path / "x"), *argv]) == 2
+        assert message in capsys.readouterr().err

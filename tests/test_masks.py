@@ -64,3 +64,53 @@ def test_rules_parse_without_data_and_a_boolean_array_is_taken_as_it_is():
     assert choice.mask is mask or np.array_equal(choice.mask, mask)
     assert choice.describe() == {"rule": "array", "used": "array", "voxels": 1}
     assert choice.phrase().endswith("mask of 1 voxels")
+
+
+def _head_phantom(n=40, seed=0, noise=10.0):
+    """An 8-bit 'head': a bright ellipsoid with a darker core on air, Rician noise over
+    everything (the background a low mode, not a plateau)."""
+    rng = np.random.default_rng(seed)
+    axis = np.linspace(-1, 1, n)
+    x, y, z = np.meshgrid(axis, axis, axis, indexing="ij")
+    r = np.sqrt((x / 0.8) ** 2 + (y / 0.65) ** 2 + (z / 0.7) ** 2)
+    clean = np.where(r < 1, 160 + 40 * np.cos(6 * x) * np.sin(5 * y), 0.0)
+    clean[r < 0.3] = 90
+    noisy = np.hypot(clean + rng.normal(0, noise, clean.shape), rng.normal(0, noise, clean.shape))
+    return np.clip(np.round(noisy), 0, 255).astype(np.uint8), r < 1
+
+
+def test_auto_finds_a_noisy_low_mode_background_and_leaves_a_full_volume_alone():
+    from skimage.filters import threshold_triangle
+
+    volume, inside = _head_phantom()
+    choice = foreground_mask(volume, "auto")
+    assert choice.used.startswith("low mode: value>")
+    threshold = float(threshold_triangle(volume))            # scikit-image's, on the volume
+    assert choice.used == f"low mode: value>{threshold:g}"
+    assert np.array_equal(choice.mask, volume > threshold)
+    assert (~choice.mask[~inside]).mean() > 0.99 and choice.mask[inside].mean() > 0.99
+    # A field without background (a smooth simulation) keeps every voxel.
+    axis = np.linspace(0, 3, 30)
+    field = np.sin(axis)[:, None, None] * np.cos(axis)[None, :, None] + axis[None, None, :]
+    assert foreground_mask(field, "auto").mask is None
+
+
+def test_auto_masks_a_signed_maps_zeros_but_not_a_signed_field_without_them():
+    rng = np.random.default_rng(1)
+    stat = np.zeros((20, 20, 20), np.float32)
+    stat[4:16, 4:12, 5:15] = rng.normal(0, 2, (12, 8, 10))   # 24 % of the voxels, signed
+    choice = foreground_mask(stat, "auto")
+    assert choice.used == "value!=0" and np.array_equal(choice.mask, stat != 0)
+    assert foreground_mask(rng.normal(size=(12, 12, 12)), "auto").mask is None
+
+
+def test_segment_volume_defaults_on_a_noisy_head_label_the_air_0():
+    from volseg import segment_volume
+
+    volume, inside = _head_phantom(48, seed=2)
+    result = segment_volume(volume)
+    assert (result.measure, result.smooth_sigma) == ("hypervolume", 1.0)
+    labelled = result.labels > 0
+    assert (~labelled[~inside]).mean() >= 0.9 and (~labelled[inside]).mean() <= 0.05
+    sizes = np.bincount(result.labels[labelled])[1:] / labelled.sum()
+    assert sizes.max() <= 0.5 and (sizes >= 0.01).sum() >= 10
