@@ -181,7 +181,7 @@ def test_a_degenerate_cut_is_one_warning_line_with_its_fix(volvis_dir, tmp_path,
         assert spread["regions_at_least_1_percent"] >= 10
 
 
-def test_measure_threshold_and_min_component_options(tmp_path, capsys):
+def test_measure_threshold_and_min_component_options(tmp_path, capsys, volvis_dir):
     out = tmp_path / "o"
     assert main(["segment", "silicium", "-o", str(out), "-q", "--json", "--measure", "size",
                  "--threshold", "2000", "--min-component", "0", "--mask", "none"]) == 0
