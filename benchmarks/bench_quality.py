@@ -11,7 +11,7 @@ one giant region, so read it beside the others).
 
 Methods, on the same field:
 - volseg's cut by hypervolume (the default), by size, and by persistence, each
-  with volseg's defaults otherwise (auto mask, sigma 1 for 8-bit);
+  with volseg's defaults otherwise (auto mask, noise-aware sigma for 8-bit);
 - volseg by persistence without smoothing or mask (the defaults before issue 26);
 - scikit-image `h_maxima` markers + `watershed` of the curvature (and of the
   value), h chosen by bisection for the part count, in volseg's mask;
@@ -75,12 +75,12 @@ def adjusted_rand(a, b):
     return float((pairs - expected) / (0.5 * (rows + cols) - expected))
 
 
-def _field(volume, use):
+def _field(volume, mask, use):
     """The field the anchors segment: volseg's curvature of the (auto-)smoothed
     volume, or that smoothed value."""
     from volseg._smoothing import gaussian
 
-    sigma, _ = auto_smoothing(volume.dtype)
+    sigma, _ = auto_smoothing(volume, mask)
     values = gaussian(volume, sigma)
     if use == "value":
         return np.asarray(values, dtype=float)
@@ -120,8 +120,8 @@ def higra_cut(field, mask, k, attribute):
 
 def methods(volume, k):
     """name -> labels of `volume` cut into `k` regions."""
-    mask = foreground_mask(volume, "auto").mask
-    mask = np.ones(volume.shape, bool) if mask is None else mask
+    found = foreground_mask(volume, "auto").mask
+    mask = np.ones(volume.shape, bool) if found is None else found
     out = {}
     for measure in ("hypervolume", "size", "persistence"):
         out[f"volseg {measure} (defaults)" if measure == "hypervolume" else
@@ -130,7 +130,7 @@ def methods(volume, k):
     out["volseg persistence, no smoothing or mask (before)"] = volseg.segment_volume(
         volume, n_regions=k, measure="persistence", smooth_sigma=0, mask=None).labels
     for use in ("curvature", "value"):
-        field = _field(volume, use)
+        field = _field(volume, found, use)
         out[f"skimage h_maxima + watershed, {use}"] = skimage_watershed(field, mask, k)
         for attribute in ("area", "dynamics"):
             out[f"higra by {attribute}, {use}"] = higra_cut(field, mask, k, attribute)

@@ -23,16 +23,20 @@ def test_mask_rules():
         foreground_mask(volume, np.ones((4, 4), bool))
 
 
-@pytest.mark.parametrize("plateau, used", [(32, "low mode: value>0.375"), (33, "nonzero")])
+@pytest.mark.parametrize("plateau, used", [(32, "none"), (33, "nonzero")])
 def test_auto_masks_the_minimum_plateau_only_above_half_the_volume(plateau, used):
     assert AUTO_PLATEAU_SHARE == 0.5
     volume = np.arange(1, 65, dtype=float).reshape(4, 4, 4)
     volume.ravel()[:plateau] = 0.0            # 32 of 64 voxels: exactly half
     choice = foreground_mask(volume, "auto")
-    # Half is no plateau by the first rule; the histogram's peak at 0 is a low mode.
+    # Half is no plateau by the first rule; nor a low mode: the bright voxels fill the
+    # border as much as the volume (no object inside a background).
     assert choice.used == used
-    assert choice.voxels == 64 - plateau
-    assert np.array_equal(choice.mask, volume > 0)
+    if used == "nonzero":
+        assert choice.voxels == 64 - plateau
+        assert np.array_equal(choice.mask, volume > 0)
+    else:
+        assert choice.mask is None and choice.voxels == 64
 
 
 def test_nonzero_is_above_the_minimum_even_when_it_is_not_zero():
@@ -109,8 +113,48 @@ def test_segment_volume_defaults_on_a_noisy_head_label_the_air_0():
 
     volume, inside = _head_phantom(48, seed=2)
     result = segment_volume(volume)
-    assert (result.measure, result.smooth_sigma) == ("hypervolume", 1.0)
+    # Rician noise of 10 grey levels: the noise-aware default smooths at the most.
+    assert (result.measure, result.smooth_sigma) == ("hypervolume", 2.0)
+    assert result.smooth_rule.startswith("auto: uint8 values, noise 1")
     labelled = result.labels > 0
     assert (~labelled[~inside]).mean() >= 0.9 and (~labelled[inside]).mean() <= 0.05
     sizes = np.bincount(result.labels[labelled])[1:] / labelled.sum()
     assert sizes.max() <= 0.5 and (sizes >= 0.01).sum() >= 10
+
+
+def _ct(kind, seed=0):
+    """int16 Hounsfield phantoms: a head in mostly air, or a body filling the view
+    with some air around it (its soft-tissue peak then tops the histogram)."""
+    rng = np.random.default_rng(seed)
+    axis = np.linspace(-1, 1, 48)
+    x, y, z = np.meshgrid(axis, axis, axis, indexing="ij")
+    if kind == "head":
+        body = np.sqrt(x**2 + y**2 + z**2) < 0.6
+    else:
+        body = np.sqrt(x**2 + y**2) < 0.95
+    ct = np.where(body, 40.0, -1000.0)
+    ct[body & (np.sqrt(x**2 + y**2) < 0.25)] = 700.0          # bone
+    return np.round(ct + rng.normal(0, 20, ct.shape)).astype(np.int16), body
+
+
+def test_low_mode_masks_air_around_a_head_but_never_a_bodys_soft_tissue():
+    head, inside = _ct("head")
+    choice = foreground_mask(head, "auto")
+    assert choice.used.startswith("low mode") and (choice.mask != inside).mean() < 0.001
+    # The body's soft tissue tops the histogram, with the air a mode below it: no low
+    # mode (a mask there would keep the bone only).
+    body, _ = _ct("body")
+    assert foreground_mask(body, "auto").mask is None
+
+
+def test_low_mode_ignores_a_saturated_top_bin_and_the_shared_tooth_loses_its_air(volvis_dir):
+    volume, inside = _head_phantom(40, seed=3, noise=10.0)
+    saturated = volume.copy()
+    saturated[inside & (np.random.default_rng(0).random(volume.shape) < 0.1)] = 255
+    choice = foreground_mask(saturated, "auto")
+    assert choice.used.startswith("low mode") and choice.mask[inside].mean() > 0.99
+    from volseg.files import load_volume
+
+    tooth = load_volume(str(volvis_dir / "tooth_103x94x161_uint8.raw")).data
+    choice = foreground_mask(tooth, "auto")       # its air is noise about 77 of 255
+    assert choice.used == "low mode: value>89" and 0.25 < choice.voxels / tooth.size < 0.32

@@ -192,3 +192,36 @@ def test_segment_mesh_sizes_are_vertex_volumes():
     np.testing.assert_allclose(result.hierarchy.cell_measure("size").sum(),
                                vertex_volumes(vertices, simplices).sum())
     assert result.n_regions == 4 and result.threshold > 0
+
+
+def test_noise_estimate_is_the_noise_and_the_same_for_dask():
+    import dask.array as da
+
+    from volseg._smoothing import noise_sigma
+
+    rng = np.random.default_rng(2)
+    axis = np.linspace(0, 4, 96)
+    smooth = 50 * np.sin(axis)[:, None, None] * np.cos(axis)[None, :, None] + 10 * axis
+    for sigma in (0.5, 3.0, 12.0):
+        noisy = smooth + rng.normal(0, sigma, smooth.shape)
+        assert abs(noise_sigma(noisy) / sigma - 1) < 0.05
+    mask = rng.random(smooth.shape) > 0.2
+    noisy = np.round(smooth + rng.normal(0, 4, smooth.shape)).astype(np.int16)
+    assert noise_sigma(da.from_array(noisy, chunks=(17, 40, 23)),
+                       da.from_array(mask, chunks=31)) == noise_sigma(noisy, mask)
+
+
+def test_auto_smoothing_follows_the_type_and_the_noise():
+    from volseg.segment import auto_smoothing
+
+    rng = np.random.default_rng(0)
+    clean = demo_volume(32)
+    assert auto_smoothing(clean)[0] == 1.0                     # 8-bit steps only
+    noisy = np.clip(clean + rng.normal(0, 12, clean.shape), 0, 255).astype(np.uint8)
+    assert 1.5 < auto_smoothing(noisy)[0] <= 2.0                # grey-level noise of 12
+    assert auto_smoothing(clean.astype(np.float32))[0] == 0.0   # floats: none
+    assert auto_smoothing(clean.astype(np.int32))[0] == 0.0
+    # A given sigma wins; the rule read the file's type, not the noise's.
+    assert segment_volume(clean, smooth_sigma=0).smooth_rule == "given"
+    result = segment_volume(clean)
+    assert result.smooth_sigma == 1.0 and result.smooth_rule.startswith("auto: uint8")

@@ -17,13 +17,18 @@ Rules (`foreground_mask`):
      exact zeros), they are masked out (``"nonzero"``); a signed volume (minimum
      below 0, maximum above) whose voxels at exactly 0 cover more than that share
      (a statistical map's background) has them masked out (``"value!=0"``);
-  2. a *low mode*: when the histogram (256 bins, one per value for integers, as
-     scikit-image's) peaks in the lowest `AUTO_LOW_MODE_RANGE` of the value range
-     and the triangle threshold of that peak (Zack et al. 1977, as scikit-image's
-     `threshold_triangle`) leaves at least `AUTO_BACKGROUND_SHARE` of the voxels
-     at or below it: the background is noise about a low value (air in CT and MRI,
-     Rician noise), masked out as ``"value>T"``;
-  3. else no mask (nucleon, tooth, a simulation without background);
+  2. a *low mode*: the background is noise about a low value (air in CT and MRI,
+     Rician noise), masked out as ``"value>T"`` when all of these hold: the
+     histogram (256 bins, one per value for integers, as scikit-image's; smoothed to
+     find its modes) peaks in the lowest `AUTO_LOW_MODE_RANGE` of the value range;
+     no other mode below that peak holds `AUTO_OTHER_MODE_SHARE` of the voxels; the
+     triangle threshold T of the histogram (Zack et al. 1977, as scikit-image's
+     `threshold_triangle`; without a saturated top bin) lies above the peak and leaves at least
+     `AUTO_BACKGROUND_SHARE` of the voxels at or below it; and the voxels above T
+     reach the volume's border less than `AUTO_BORDER_RATIO` times as often as
+     they fill the volume (an object inside its background, not a field whose
+     bright values are everywhere);
+  3. else no mask (a simulation without background, a random field);
 - ``"nonzero"``: value above the volume's minimum;
 - ``"value>T"``, ``"value>=T"``, ``"value<T"``, ``"value<=T"``: a threshold;
 - ``"otsu"``: value above Otsu's threshold (scikit-image);
@@ -41,14 +46,21 @@ import numpy as np
 from numpy.typing import NDArray
 
 __all__ = ["foreground_mask", "check_rule", "MaskChoice", "AUTO_PLATEAU_SHARE",
-           "AUTO_LOW_MODE_RANGE", "AUTO_BACKGROUND_SHARE", "MASK_RULES"]
+           "AUTO_LOW_MODE_RANGE", "AUTO_OTHER_MODE_SHARE", "AUTO_BACKGROUND_SHARE",
+           "AUTO_BORDER_RATIO", "MASK_RULES"]
 
 #: ``"auto"`` masks the minimum plateau when it covers more than this share of the voxels.
 AUTO_PLATEAU_SHARE = 0.5
-#: ``"auto"``'s low mode: the histogram's peak lies in this lowest share of the range ...
-AUTO_LOW_MODE_RANGE = 0.125
-#: ... and at least this share of the voxels is at or below its triangle threshold.
+#: ``"auto"``'s low mode: the histogram's peak lies in this lowest share of the range,
+AUTO_LOW_MODE_RANGE = 1 / 3
+#: with no other mode below it holding this share of the voxels (a CT's air below
+#: its soft-tissue peak),
+AUTO_OTHER_MODE_SHARE = 0.02
+#: at least this share of the voxels at or below its triangle threshold,
 AUTO_BACKGROUND_SHARE = 0.25
+#: and the voxels above it reach the volume's border less than this fraction as
+#: often as they fill the volume (an object surrounded by its background).
+AUTO_BORDER_RATIO = 0.2
 MASK_RULES = ("auto", "none", "nonzero", "otsu", "value>T", "value>=T", "value<T", "value<=T")
 _THRESHOLD = re.compile(r"^\s*value\s*(>=|<=|>|<)\s*([-+0-9.eE]+|[-+]?inf)\s*$")
 
@@ -169,15 +181,48 @@ def _auto(data, lazy: bool) -> MaskChoice:
         _, at_zero = _plateau(data, lazy, 0)
         if at_zero > AUTO_PLATEAU_SHARE * data.size:
             return _checked(MaskChoice(data != 0, "auto", "value!=0", int(data.size - at_zero)))
-    counts, centers = _histogram(data, lazy)
-    peak = int(np.argmax(counts))
-    if (centers[peak] - lowest) <= AUTO_LOW_MODE_RANGE * (highest - lowest):
-        threshold = _triangle(counts, centers)
-        below = counts[centers <= threshold].sum()
-        if below >= AUTO_BACKGROUND_SHARE * data.size:
-            return _checked(MaskChoice(data > threshold, "auto", f"low mode: value>{threshold:g}",
-                                       0))
+    threshold = _low_mode(data, lazy, lowest, highest)
+    if threshold is not None:
+        return _checked(MaskChoice(data > threshold, "auto", f"low mode: value>{threshold:g}", 0))
     return MaskChoice(None, "auto", "none", int(data.size))
+
+
+def _low_mode(data, lazy: bool, lowest: float, highest: float):
+    """The triangle threshold of a background that is a low mode of the histogram (the
+    module docstring's rule 2), or None."""
+    from scipy.ndimage import gaussian_filter1d
+
+    counts, centers = _histogram(data, lazy)
+    smooth = gaussian_filter1d(counts.astype(np.float64), max(1.0, len(counts) / 128))
+    peak = int(np.argmax(smooth))
+    if centers[peak] - lowest > AUTO_LOW_MODE_RANGE * (highest - lowest):
+        return None
+    valley = int(np.argmin(smooth[:peak + 1]))         # below the peak: another mode?
+    if (counts[:valley].sum() >= AUTO_OTHER_MODE_SHARE * data.size
+            and smooth[:valley].max(initial=0) > 1.5 * smooth[valley]):
+        return None
+    top = len(counts)
+    if top > 2 and counts[-1] > 3 * counts[-2]:
+        top -= 1            # a saturated top bin (values clipped at the type's maximum)
+    threshold = _triangle(counts[:top], centers[:top])
+    above = counts[centers > threshold].sum() / data.size
+    if threshold <= centers[peak] or 1 - above < AUTO_BACKGROUND_SHARE:
+        return None
+    if _border_share_above(data, threshold, lazy) >= AUTO_BORDER_RATIO * above:
+        return None               # the bright voxels reach the border as often: no object
+    return threshold
+
+
+def _border_share_above(data, threshold, lazy: bool) -> float:
+    """The share of the volume's border voxels (its six faces) above `threshold`."""
+    faces = [data[index] for axis in range(3) for index in
+             ((slice(None),) * axis + (0,), (slice(None),) * axis + (-1,))]
+    counts = [(face > threshold).sum() for face in faces]
+    if lazy:
+        import dask
+
+        counts = dask.compute(*counts)
+    return float(sum(int(c) for c in counts)) / sum(face.size for face in faces)
 
 
 def _range(data, lazy: bool) -> tuple:

@@ -10,6 +10,7 @@ path does differently is its `Storage`: hooks that do nothing in memory
 
 from __future__ import annotations
 
+import dataclasses
 import time
 import warnings
 from contextlib import contextmanager
@@ -21,7 +22,7 @@ from numpy.typing import NDArray
 from . import _validate
 from ._block_hooks import BlockHooks
 from ._block_hooks import compute as _compute
-from ._smoothing import gaussian
+from ._smoothing import gaussian, noise_sigma
 from .curvature import (
     Operator,
     check_padding,
@@ -35,15 +36,20 @@ from .morse import MorseHierarchy, check_measure_cut, descending_complex
 __all__ = ["Segmentation", "SegmentRequest", "CutRequest", "Storage", "InMemory", "run_stages",
            "segment_volume", "segment_mesh", "DEFAULT_REGIONS", "DEFAULT_MEASURE",
            "DEFAULT_MIN_COMPONENT", "AUTO_REGION_RANGE", "AUTO_INTEGER_SIGMA",
-           "auto_smoothing"]
+           "AUTO_NOISE_UNIT", "AUTO_MAX_SIGMA", "auto_smoothing"]
 
 #: Default cut: 30 regions, the middle of the paper's 20-40 range.
 DEFAULT_REGIONS = 30
 #: Mask components holding less than this share of the mask are labelled 0 (they
 #: take no region of the count): the specks a threshold leaves in noise.
 DEFAULT_MIN_COMPONENT = 0.001
-#: Default Gaussian pre-smoothing (voxels) of integer data of at most 16 bits.
+#: Default Gaussian pre-smoothing (voxels) of integer data of at most 16 bits: at
+#: least this, ...
 AUTO_INTEGER_SIGMA = 1.0
+#: ... sqrt(noise / this) for noisier data (noise in the values' units) ...
+AUTO_NOISE_UNIT = 2.5
+#: ... and at most this.
+AUTO_MAX_SIGMA = 2.0
 #: Default measure of the cut (DESIGN.md section 12).
 DEFAULT_MEASURE = "hypervolume"
 #: Where ``n_regions="auto"`` looks for the largest persistence gap: the paper's range.
@@ -206,10 +212,11 @@ class CutRequest:
     def of(self, hierarchy: MorseHierarchy) -> dict:
         """The keyword arguments of ``hierarchy.segment`` / ``region_of_maximum`` for
         this cut, the ``auto`` count chosen on `hierarchy`."""
-        n_regions = (hierarchy.largest_gap(AUTO_REGION_RANGE, self.measure) if self.auto
-                     else self.n_regions)
+        min_component = self.min_component if hierarchy.mask is not None else 0.0
+        n_regions = (hierarchy.largest_gap(AUTO_REGION_RANGE, self.measure, min_component)
+                     if self.auto else self.n_regions)
         return {"n_regions": n_regions, "measure": self.measure, "threshold": self.threshold,
-                "min_component": self.min_component if hierarchy.mask is not None else 0.0}
+                "min_component": min_component}
 
 
 @dataclass(frozen=True)
@@ -226,8 +233,9 @@ class SegmentRequest:
     spacing: tuple
     padding: str
     mask: object
-    smooth_sigma: float
+    smooth_sigma: float | None
     smooth_rule: str = "given"
+    dtype: np.dtype | None = None
 
     @classmethod
     def checked(cls, *, operator="weighted", min_persistence=None, n_regions=None,
@@ -237,24 +245,40 @@ class SegmentRequest:
         cut = CutRequest.checked(
             min_persistence, n_regions, threshold=threshold, measure=measure,
             min_component=DEFAULT_MIN_COMPONENT if min_component is None else min_component)
-        sigma, rule = auto_smoothing(dtype) if smooth_sigma is None else (
-            _validate.smooth(smooth_sigma), "given")
+        sigma = None if smooth_sigma is None else _validate.smooth(smooth_sigma)
         return cls(get_operator(operator), cut,
                    None if value_scale is None else _validate.value_scale(value_scale),
                    _validate.spacing(spacing, default_spacing), check_padding(padding), mask,
-                   sigma, rule)
+                   sigma, "given" if sigma is not None else "auto",
+                   None if dtype is None else np.dtype(dtype))
+
+    def with_smoothing(self, data, mask) -> SegmentRequest:
+        """The request with its smoothing resolved: `auto_smoothing` of `data` inside
+        `mask` when none was given."""
+        if self.smooth_sigma is not None:
+            return self
+        sigma, rule = auto_smoothing(data, mask, self.dtype)
+        return dataclasses.replace(self, smooth_sigma=sigma, smooth_rule=rule)
 
 
-def auto_smoothing(dtype) -> tuple:
-    """(sigma, rule) of the default pre-smoothing for values of `dtype`:
-    `AUTO_INTEGER_SIGMA` voxels for integers of at most 16 bits (8-bit CT and MRI,
-    12-bit scanners: the curvature of their quantization steps is voxel-sized
-    noise), 0 for floats and wider integers (simulations, probability maps saved
-    as floats, statistical maps)."""
-    dtype = None if dtype is None else np.dtype(dtype)
-    if dtype is not None and dtype.kind in "biu" and dtype.itemsize <= 2:
-        return AUTO_INTEGER_SIGMA, f"auto: {dtype} values"
-    return 0.0, "auto: " + ("no dtype" if dtype is None else f"{dtype} values")
+def auto_smoothing(data, mask=None, dtype=None) -> tuple:
+    """(sigma, rule) of the default pre-smoothing of `data` (values of `dtype`, by
+    default the array's: the file's type, before any added noise).
+
+    Integers of at most 16 bits (8-bit CT and MRI, 12-bit scanners): their
+    quantization steps are voxel-sized curvature noise, so sigma is at least
+    `AUTO_INTEGER_SIGMA`; with more noise, ``sqrt(noise / AUTO_NOISE_UNIT)`` up to
+    `AUTO_MAX_SIGMA`, where noise is `volseg._smoothing.noise_sigma` inside `mask`
+    (in the values' units: 1 on a clean 8-bit scan, 12 under Rician noise of 12).
+    Floats and wider integers (simulations, float maps): 0.
+    """
+    dtype = np.dtype(data.dtype if dtype is None else dtype)
+    if dtype.kind not in "biu" or dtype.itemsize > 2:
+        return 0.0, f"auto: {dtype} values, none"
+    noise = noise_sigma(data, mask)
+    sigma = round(float(np.clip(np.sqrt(noise / AUTO_NOISE_UNIT), AUTO_INTEGER_SIGMA,
+                                AUTO_MAX_SIGMA)), 2)
+    return sigma, f"auto: {dtype} values, noise {noise:.3g}"
 
 
 class Storage:
@@ -268,8 +292,8 @@ class Storage:
     #: `BlockHooks` for the blockwise stages (None: plain Dask, or numpy).
     block_hooks: BlockHooks | None = None
 
-    def begin(self, choice: MaskChoice) -> None:
-        """Called once the mask is resolved, before any stage runs."""
+    def begin(self, choice: MaskChoice, request: SegmentRequest) -> None:
+        """Called once the mask and the smoothing are resolved, before any stage runs."""
 
     def smoothed(self, values):
         return values
@@ -306,7 +330,8 @@ def run_stages(data, request: SegmentRequest, storage: Storage | None = None
     """
     storage = storage or InMemory()
     choice = foreground_mask(data, request.mask)     # of the values as read
-    storage.begin(choice)
+    request = request.with_smoothing(data, choice.mask)
+    storage.begin(choice, request)
     hooks = storage.block_hooks       # set by `begin` (the blockwise work folder's)
     timings = {}
     with _timed(timings, "curvature"):
@@ -350,7 +375,7 @@ def _morse_and_cut(field, cut: CutRequest, timings, *, mask=None, adjacency=None
     with _timed(timings, "labels"):
         labels = storage.labels(labels, k)
     threshold = (float(cut.threshold) if cut.threshold is not None
-                 else hierarchy.threshold_for(k, cut.measure))
+                 else hierarchy.threshold_for(k, cut.measure, asked["min_component"]))
     record = {"measure": cut.measure, "threshold": cut.threshold,
               "min_persistence": cut.min_persistence, "n_regions": asked["n_regions"],
               "auto": cut.auto, "cut_threshold": threshold,
@@ -432,8 +457,8 @@ def segment_volume(
         Standard deviation in voxels of a Gaussian applied to the values before the
         curvature (0: none, the values as they are). Tames the checkerboard that
         8-bit quantization gives the curvature; features smaller than about
-        2 `smooth_sigma` voxels vanish. Default `auto_smoothing` of the volume's
-        type: `AUTO_INTEGER_SIGMA` for integers of at most 16 bits, else 0.
+        2 `smooth_sigma` voxels vanish. Default `auto_smoothing`: for integers of
+        at most 16 bits 1 to 2 voxels by the measured noise, else 0.
     measure : {'persistence', 'size', 'hypervolume'}, optional
         What decides which regions survive the cut (DESIGN.md section 12;
         default `DEFAULT_MEASURE`): ``persistence`` keeps the tallest peaks of the

@@ -164,6 +164,12 @@ def test_small_mask_components_are_label_0_and_take_no_region():
         assert ((labels > 0) == big).all() and labels.max() == 10
         assert sorted(np.unique(labels[big])) == list(range(1, 11))
     assert dropped.sum() == len(np.unique(h.cells[~big & mask]))
+    # The curve, its thresholds and the auto count leave the dropped components out.
+    extinction, components = h.curve("hypervolume", 0.001)
+    assert components == 1 and len(extinction) == (~dropped[h.young]).sum()
+    t = h.threshold_for(10, "hypervolume", 0.001)
+    assert h.segment(threshold=t, measure="hypervolume", min_component=0.001).max() == 10
+    assert 20 <= h.largest_gap((20, 40), "hypervolume", 0.001) <= 40
     with pytest.raises(ValueError, match="share"):
         h.segment(n_regions=3, min_component=1.5)
 

@@ -86,10 +86,11 @@ class BlockwiseStorage(Storage):
         self.chunks = "x".join(str(max(c)) for c in data.chunks)
         self._run = engine.compute if engine is not None else BlockHooks().compute
 
-    def begin(self, choice):
+    def begin(self, choice, request=None):
         """The work folder (keyed by everything that changes a block), after the free
-        disk is checked."""
-        data, request = self.data, self.request
+        disk is checked; `request` with its smoothing resolved (`run_stages`)."""
+        self.request = request = request or self.request
+        data = self.data
         _check_disk(self.folder, self.work_folder, data.size, request.smooth_sigma, self.say)
         self.work = WorkFolder(self.work_folder, {
             "volseg": __version__, "input": self.checksum, "shape": list(data.shape),

@@ -159,6 +159,15 @@ class MorseHierarchy:
             return self.event_persistence
         return self._pruning(measure)[1]
 
+    def curve(self, measure: str = "persistence", min_component: float = 0.0) -> tuple:
+        """(extinctions, components) of the cuts' curve: the `extinction` of every
+        event and the count of components that never merge, both without the
+        components that `min_component` drops (they take no region)."""
+        dropped = self.small_components(min_component)
+        kept = ~dropped[self.young]
+        components = self.n_components - len(np.unique(self.component_of_maximum()[dropped]))
+        return self.extinction(measure)[kept], components
+
     def cell_measure(self, measure: str) -> NDArray[np.float64]:
         """(M,) the ``size`` or ``hypervolume`` of each maximum's own cell."""
         if check_measure(measure) == "persistence":
@@ -174,15 +183,18 @@ class MorseHierarchy:
             self._pruned[measure] = (order, extinction, base)
         return self._pruned[measure]
 
-    def threshold_for(self, n_regions: int, measure: str = "persistence") -> float:
+    def threshold_for(self, n_regions: int, measure: str = "persistence",
+                      min_component: float = 0.0) -> float:
         """A threshold of `measure` whose cut has `n_regions` regions, if ties allow.
 
         The midpoint between the last kept and the first merged event's extinction;
-        `segment(n_regions=k)` is exact even where ties make no threshold so.
+        `segment(n_regions=k)` is exact even where ties make no threshold so. With
+        `min_component`, among the components that are kept.
         """
         _, n_regions = check_cut(n_regions=n_regions)
-        p = np.sort(self.extinction(measure))[::-1]
-        keep = n_regions - self.n_components
+        extinction, components = self.curve(measure, min_component)
+        p = np.sort(extinction)[::-1]
+        keep = n_regions - components
         if keep <= 0:
             return float(p[0]) + 1.0 if len(p) else 0.0
         if keep >= len(p):
@@ -195,16 +207,18 @@ class MorseHierarchy:
         p = np.sort(self.extinction(measure))
         return self.n_components + len(p) - np.searchsorted(p, np.asarray(thresholds), side="left")
 
-    def largest_gap(self, region_range=(20, 40), measure: str = "persistence") -> int:
+    def largest_gap(self, region_range=(20, 40), measure: str = "persistence",
+                    min_component: float = 0.0) -> int:
         """The region count k in `region_range` (inclusive) whose cut sits in the widest
         gap between consecutive extinctions of `measure`, on a log scale: the most
-        clearly separated simplification. Falls back to the range's ends when the
-        hierarchy has fewer maxima."""
+        clearly separated simplification (among the components `min_component`
+        keeps). Falls back to the range's ends when the hierarchy has fewer maxima."""
         lo, hi = (int(r) for r in region_range)
-        p = np.sort(self.extinction(measure))[::-1]
+        extinction, components = self.curve(measure, min_component)
+        p = np.sort(extinction)[::-1]
         best, best_gap = None, -np.inf
-        for k in range(max(lo, self.n_components), hi + 1):
-            keep = k - self.n_components
+        for k in range(max(lo, components), hi + 1):
+            keep = k - components
             if keep < 1 or keep >= len(p):
                 continue
             gap = np.log(p[keep - 1]) - np.log(p[keep]) if p[keep] > 0 else np.inf

@@ -35,7 +35,8 @@ def write_result_files(paths: dict, result, values, info: dict, *, frame: Frame 
     arrays = {"labels": lambda: result.labels.astype(label_type),
               "curvature": lambda: result.curvature.astype(np.float32)}
     hierarchy = result.hierarchy
-    curve = (hierarchy.extinction(result.measure), hierarchy.n_components, result.threshold)
+    curve = (*hierarchy.curve(result.measure, result.cut.get("min_component", 0.0)),
+             result.threshold)
     # The writers run at once (zlib releases the GIL).
     with ThreadPoolExecutor(3) as pool:
         jobs = [pool.submit(_write_array, Path(paths[key]), arrays[kind], frame)
