@@ -397,7 +397,12 @@ def _cmd_compare(args):
     return 0
 
 
+#: The exit code of an interrupted run (Ctrl-C or SIGTERM), as a shell reports SIGINT.
+INTERRUPTED = 130
+
+
 def _raise_interrupt(signum, frame):
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)     # once: the unwinding is not cut short
     raise KeyboardInterrupt
 
 
@@ -421,13 +426,30 @@ def main(argv=None) -> int:
         return 2
     except KeyboardInterrupt:
         print("volseg: interrupted", file=sys.stderr)
-        return 130
+        return INTERRUPTED
     except Exception as err:  # noqa: BLE001 - the last resort, reported as such
         print(f"volseg: unexpected failure (a bug; please report it): {type(err).__name__}: "
               f"{_one_line(err)}", file=sys.stderr)
         return 1
     finally:
         signal.signal(signal.SIGTERM, previous)
+
+
+def run():
+    """The ``volseg`` command: `main`, then the process's exit with its code.
+
+    After an interrupt everything is cleaned up already (staging removed, lock
+    released), but the interrupt can land in the middle of an import, and finishing
+    the interpreter over a half-imported module can end the process by SIGINT
+    instead of this exit code: that exit skips the interpreter's finalization."""
+    import os
+
+    code = main()
+    if code == INTERRUPTED:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+    sys.exit(code)
 
 
 def _one_line(err) -> str:
@@ -438,4 +460,4 @@ def _one_line(err) -> str:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run()

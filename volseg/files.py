@@ -219,6 +219,8 @@ def segment_to_files(volume, outputs, *, operator="weighted", n_regions=None,
 
     def write(paths):
         storage = _storage(volume, data, request, paths, outputs, checksum, engine, say)
+        if lazy:       # removed with the commit, or by the next run that finishes it
+            outputs.discard = [storage.work_folder]
         blocks = f" in {storage.chunks} blocks" if lazy else ""
         say(f"{name}: curvature ({request.operator.name}) and Morse complex of a "
             f"{'x'.join(map(str, data.shape))} volume{blocks}")

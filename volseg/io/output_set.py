@@ -21,6 +21,7 @@ import errno
 import fcntl
 import json
 import os
+import re
 import shutil
 import stat
 import tempfile
@@ -63,11 +64,18 @@ class FolderLock:
 
     def acquire(self):
         while self._fd is None:
-            try:
-                fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+            try:      # never through a planted link, never anything but a regular file
+                fd = os.open(self.path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o644)
             except OSError as err:
+                if err.errno == errno.ELOOP:
+                    raise OutputError(f"{self.path}: is a symbolic link, not volseg's lock "
+                                      "file; remove it") from None
                 raise OutputError(f"{self.folder}: cannot create a lock file there "
                                   f"({err.strerror})") from None
+            if not stat.S_ISREG(os.fstat(fd).st_mode):
+                os.close(fd)
+                raise OutputError(f"{self.path}: is not a regular file, not volseg's lock "
+                                  "file; remove it")
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX | (0 if self.wait else fcntl.LOCK_NB))
             except OSError as err:
@@ -77,7 +85,7 @@ class FolderLock:
                 raise OutputError(f"{self.folder}: {self.busy}; wait for it to finish, "
                                   "or use --wait") from None
             try:
-                same = os.path.samestat(os.fstat(fd), os.stat(self.path))
+                same = os.path.samestat(os.fstat(fd), os.lstat(self.path))
             except FileNotFoundError:
                 same = False
             if same:
@@ -89,7 +97,11 @@ class FolderLock:
 
     def release(self):
         if self._fd is not None:
-            self.path.unlink(missing_ok=True)
+            try:          # only the file this process holds (not one planted since)
+                if os.path.samestat(os.fstat(self._fd), os.lstat(self.path)):
+                    self.path.unlink()
+            except FileNotFoundError:
+                pass
             os.close(self._fd)
             self._fd = None
 
@@ -98,25 +110,113 @@ def _staging_prefix(stem: str) -> str:
     return f"{_STAGING}{stem}-"
 
 
+#: What `tempfile.mkdtemp` appends: 8 characters of this alphabet.
+_STAGING_SUFFIX = re.compile(r"[a-z0-9_]{8}")
+
+
+def _stagings(folder: Path, stem: str) -> list[Path]:
+    """The staging folders of exactly `stem` (``scan``'s, not ``scan-2``'s)."""
+    prefix = _staging_prefix(stem)
+    return sorted(p for p in folder.iterdir() if p.name.startswith(prefix)
+                  and _STAGING_SUFFIX.fullmatch(p.name[len(prefix):]))
+
+
+def _journal(staging: Path, stem: str) -> dict | None:
+    """The commit journal of a staging folder, checked: ``{"names": [...], "discard":
+    [...]}`` (an older journal is the list of names), every entry a plain name of this
+    stem's outputs (``<stem>_...``) or of its work folder (``.<stem>.volseg-work``).
+    None without a journal; an `OutputError` naming it when it is anything else."""
+    path = staging / _JOURNAL
+    try:
+        mode = os.lstat(path).st_mode
+    except FileNotFoundError:
+        return None
+    problem = None if stat.S_ISREG(mode) else "is not a regular file"
+    entry = None
+    if problem is None:
+        try:
+            entry = json.loads(path.read_bytes()[:1 << 20])
+        except (ValueError, UnicodeDecodeError):
+            problem = "is not JSON"
+    if problem is None:
+        entry = {"names": entry, "discard": []} if isinstance(entry, list) else entry
+        if (not isinstance(entry, dict) or set(entry) != {"names", "discard"}
+                or not all(isinstance(v, list) for v in entry.values())):
+            problem = "does not list the set's names"
+        else:
+            allowed = (all(_plain(n) and n.startswith(f"{stem}_") for n in entry["names"])
+                       and all(n == f".{stem}.volseg-work" for n in entry["discard"]))
+            problem = None if allowed else "names files that are not this set's"
+    if problem is not None:
+        raise OutputError(f"{path}: {problem}: not a commit journal volseg wrote. Check "
+                          f"{staging.name}/new and /old (files of an interrupted commit), "
+                          f"move what you need, then remove {staging}")
+    return entry
+
+
+def _plain(name) -> bool:
+    """A file name with no path in it."""
+    return (isinstance(name, str) and name not in ("", ".", "..") and "/" not in name
+            and "\0" not in name)
+
+
+def _real_dir(path: Path) -> bool:
+    try:
+        return stat.S_ISDIR(os.lstat(path).st_mode)
+    except FileNotFoundError:
+        return False
+
+
+def _remove(path: Path):
+    """Remove a file, a link or a folder (never what a link points to)."""
+    try:
+        mode = os.lstat(path).st_mode
+    except FileNotFoundError:
+        return
+    if stat.S_ISDIR(mode):
+        shutil.rmtree(path, ignore_errors=True)
+    else:
+        path.unlink(missing_ok=True)
+
+
+def _place(new: Path, target: Path, aside: Path):
+    """Move `new` onto `target`, the old `target` first moved to `aside` (a folder
+    cannot be replaced in one rename)."""
+    if os.path.lexists(target):
+        if os.path.lexists(aside):
+            _remove(aside)
+        os.replace(target, aside)
+    os.replace(new, target)
+
+
 def recover(folder, stem: str) -> list[str]:
     """Finish or discard what killed writers of `stem` left in `folder`.
 
     Call it only while holding the stem's lock (`OutputSet` does). A staging folder
-    with a journal is rolled forward (its new files moved into place); one without
-    is removed. Returns what was done, one line per staging folder.
+    with a journal is rolled forward: its new files and folders moved into place (the
+    old ones aside, then removed) and what the journal discards (the set's work
+    folder) removed; one without is removed. Returns what was done, one line per
+    staging folder. A staging that is a link, or a journal volseg did not write, is
+    refused with an `OutputError` naming it (nothing is moved).
     """
     folder = Path(folder)
     done = []
-    prefix = _staging_prefix(stem)
-    for staging in sorted(p for p in folder.iterdir() if p.name.startswith(prefix)):
-        journal = staging / _JOURNAL
-        if journal.exists():
-            names = json.loads(journal.read_text())
-            for name in names:
+    for staging in _stagings(folder, stem):
+        if not _real_dir(staging):
+            raise OutputError(f"{staging}: is not a folder volseg made (a link?); remove it")
+        journal = _journal(staging, stem)
+        if journal is not None:
+            old = staging / "old"
+            if not _real_dir(old):
+                os.mkdir(old)
+            for name in journal["names"]:
                 new = staging / "new" / name
-                if new.exists():
-                    os.replace(new, folder / name)
-            done.append(f"{staging.name}: completed an interrupted commit of {len(names)} files")
+                if os.path.lexists(new):
+                    _place(new, folder / name, old / name)
+            for name in journal["discard"]:
+                _remove(folder / name)
+            done.append(f"{staging.name}: completed an interrupted commit of "
+                        f"{len(journal['names'])} files")
         else:
             done.append(f"{staging.name}: removed the staging of an interrupted run")
         shutil.rmtree(staging, ignore_errors=True)
@@ -152,6 +252,9 @@ class OutputSet:
         self.force = force
         self.wait = wait
         self.recovered: list[str] = []
+        #: Paths in the folder removed with the commit (the blockwise run's work
+        #: folder): in the journal, so a commit finished by `recover` removes them too.
+        self.discard: list[Path] = []
         self._lock = FolderLock(self.folder, stem, wait=wait,
                                 busy=f"another volseg process is writing {stem}_* there")
 
@@ -214,9 +317,14 @@ class OutputSet:
                 raise RuntimeError(f"the writer did not write {', '.join(missing)}")
             self.check()  # nothing appeared meanwhile (the lock keeps volseg out, not others)
             journal = staging / f".{_JOURNAL}.part"
-            journal.write_text(json.dumps([t.name for t in self.targets.values()]))
+            journal.write_text(json.dumps({"names": [t.name for t in self.targets.values()],
+                                           "discard": [p.name for p in self.discard]}))
+            _fsync(journal)
             os.replace(journal, staging / _JOURNAL)
+            _fsync(staging)
             self._swap(staging)
+            for path in self.discard:
+                _remove(path)
         finally:
             shutil.rmtree(staging, ignore_errors=True)
         return dict(self.targets)
@@ -225,7 +333,7 @@ class OutputSet:
         moved_aside, placed = [], []
         try:
             for target in self.targets.values():
-                if target.exists():
+                if os.path.lexists(target):
                     os.replace(target, staging / "old" / target.name)
                     moved_aside.append(target)
             for target in self.targets.values():
@@ -239,3 +347,13 @@ class OutputSet:
             (staging / _JOURNAL).unlink(missing_ok=True)
             raise
 
+
+
+def _fsync(path: Path):
+    """Flush a file's or a folder's entry to disk (a journal must survive a power loss
+    before anything is moved)."""
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)

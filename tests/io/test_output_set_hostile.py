@@ -1,0 +1,170 @@
+"""The output folder is not trusted (issue 27): kills in the commit window over folder
+outputs, stems that share a prefix, planted links and journals."""
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+
+from volseg.cli import main
+from volseg.errors import OutputError
+from volseg.io import OutputSet, recover
+
+NAMES = {"labels": "fuel_labels.zarr", "summary": "fuel_summary.json"}
+
+
+def _old_set(folder):
+    (folder / "fuel_labels.zarr").mkdir(parents=True)
+    (folder / "fuel_labels.zarr" / "chunk").write_text("old")
+    (folder / "fuel_summary.json").write_text("old")
+
+
+def _staging(folder, stem="fuel", suffix="abcd1234", journal=None):
+    staging = folder / f".volseg-staging-{stem}-{suffix}"
+    (staging / "new" / f"{stem}_labels.zarr").mkdir(parents=True)
+    (staging / "new" / f"{stem}_labels.zarr" / "chunk").write_text("new")
+    (staging / "new" / f"{stem}_summary.json").write_text("new")
+    (staging / "old").mkdir()
+    if journal is not None:
+        (staging / "COMMIT").write_text(journal if isinstance(journal, str)
+                                        else json.dumps(journal))
+    return staging
+
+
+def _contents(folder):
+    return ((folder / "fuel_labels.zarr" / "chunk").read_text(),
+            (folder / "fuel_summary.json").read_text())
+
+
+@pytest.mark.parametrize("moved_aside", [0, 1, 2])
+def test_a_commit_killed_over_an_old_set_of_folders_is_finished_by_the_next_run(
+        tmp_path, moved_aside):
+    _old_set(tmp_path)
+    staging = _staging(tmp_path, journal={"names": list(NAMES.values()),
+                                          "discard": [".fuel.volseg-work"]})
+    (tmp_path / ".fuel.volseg-work").mkdir()          # the blockwise run's finished blocks
+    for name in list(NAMES.values())[:moved_aside]:  # killed after some old moved aside
+        os.replace(tmp_path / name, staging / "old" / name)
+    with OutputSet(tmp_path, "fuel", NAMES, force=True) as out:
+        assert out.recovered and "completed an interrupted commit" in out.recovered[0]
+    assert _contents(tmp_path) == ("new", "new")      # one complete set: the new one
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(NAMES.values())
+
+
+def test_a_commit_over_folders_replaces_them_and_removes_what_it_discards(tmp_path):
+    _old_set(tmp_path)
+    (tmp_path / ".fuel.volseg-work").mkdir()
+
+    def write(paths):
+        paths["labels"].mkdir()
+        (paths["labels"] / "chunk").write_text("new")
+        paths["summary"].write_text("new")
+
+    with OutputSet(tmp_path, "fuel", NAMES, force=True) as out:
+        out.discard = [tmp_path / ".fuel.volseg-work"]
+        out.commit(write)
+    assert _contents(tmp_path) == ("new", "new")
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(NAMES.values())
+
+
+def test_recovery_of_a_stem_leaves_a_longer_stems_staging_alone(tmp_path):
+    live = _staging(tmp_path, stem="scan-2")                        # a run on scan-2
+    old = _staging(tmp_path, stem="scan", suffix="zz99yy88")       # scan's, stale
+    done = recover(tmp_path, "scan")
+    assert len(done) == 1 and not old.exists() and live.exists()
+    assert recover(tmp_path, "scan-2") and not live.exists()
+
+
+def test_a_planted_lock_link_is_refused_and_its_target_untouched(tmp_path, capsys):
+    victim = tmp_path / "victim.txt"
+    victim.write_text("precious")
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / ".fuel.volseg-lock").symlink_to("../victim.txt")
+    assert main(["segment", "fuel", "-o", str(out), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "symbolic link" in err and ".fuel.volseg-lock" in err
+    assert victim.read_text() == "precious"
+    assert sorted(p.name for p in out.iterdir()) == [".fuel.volseg-lock"]
+
+
+@pytest.mark.parametrize("journal, problem", [
+    (["../escaped.txt"], "names files that are not this set's"),
+    ({"names": ["fuel_summary.json"], "discard": ["../../home"]},
+     "names files that are not this set's"),
+    ("[1, 2]", "names files that are not this set's"),
+    ("{", "is not JSON"),
+    ('{"names": 3}', "does not list the set's names"),
+])
+def test_a_planted_or_corrupt_journal_is_refused_with_one_line_and_nothing_moves(
+        tmp_path, capsys, journal, problem):
+    out = tmp_path / "out"
+    out.mkdir()
+    staging = _staging(out, journal=journal)
+    (staging / "escaped.txt").write_text("planted")
+    before = sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*"))
+    assert main(["segment", "fuel", "-o", str(out), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and problem in err and str(staging / "COMMIT") in err
+    assert "then remove" in err                     # what to do
+    assert sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*")) == before
+    assert not (tmp_path / "escaped.txt").exists()
+    # Done as told, the folder is usable again.
+    import shutil
+
+    shutil.rmtree(staging)
+    assert main(["segment", "fuel", "-o", str(out), "-q"]) == 0
+
+
+def test_a_staging_link_is_refused(tmp_path):
+    elsewhere = _staging(tmp_path / "elsewhere", journal=list(NAMES.values()))
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / ".volseg-staging-fuel-abcd1234").symlink_to(elsewhere)
+    with pytest.raises(OutputError, match="is not a folder volseg made"):
+        recover(out, "fuel")
+    assert (elsewhere / "new" / "fuel_summary.json").exists()
+
+
+@pytest.mark.slow
+def test_a_blockwise_run_killed_after_its_journal_over_an_old_set_heals(tmp_path, volvis_dir):
+    out = tmp_path / "out"
+    source = str(volvis_dir / "silicium_98x34x34_uint8.raw")
+    assert main(["segment", source, "-o", str(out), "-q", "--regions", "7",
+                 "--chunks", "16"]) == 0
+    old = json.loads((out / "silicium_summary.json").read_text())
+    assert old["n_regions"] == 7
+    # The next run is killed after its journal and the first rename of the swap.
+    script = textwrap.dedent(f"""
+        import os, sys
+        from volseg.io import output_set
+        real = output_set.OutputSet._swap
+        def swap(self, staging):
+            first = next(iter(self.targets.values()))
+            os.replace(first, staging / "old" / first.name)
+            os._exit(9)
+        output_set.OutputSet._swap = swap
+        from volseg.cli import main
+        sys.exit(main(["segment", {source!r}, "-o", {str(out)!r}, "-q", "--force",
+                       "--chunks", "16"]))
+    """)
+    killed = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True)
+    assert killed.returncode == 9, killed.stderr
+    assert any((p / "COMMIT").exists() for p in out.iterdir() if p.name.startswith("."))
+    # Any later run finishes that commit first (the killed run's set, 30 regions,
+    # its work folder removed); without --force it then refuses to overwrite it ...
+    assert main(["segment", source, "-o", str(out), "-q", "--chunks", "16"]) == 2
+    summary = json.loads((out / "silicium_summary.json").read_text())
+    assert summary["n_regions"] == 30 and summary["input_sha256"] == old["input_sha256"]
+    assert [p.name for p in out.iterdir() if p.name.startswith(".")] == []
+    # ... and with --force it writes its own.
+    assert main(["segment", source, "-o", str(out), "-q", "--force", "--chunks", "16",
+                 "--regions", "9"]) == 0
+    assert json.loads((out / "silicium_summary.json").read_text())["n_regions"] == 9
+    assert [p.name for p in out.iterdir() if p.name.startswith(".")] == []
+    labels = np.asarray(__import__("zarr").open(str(out / "silicium_labels.zarr"), mode="r"))
+    assert labels.max() == 9
