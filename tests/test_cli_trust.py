@@ -298,3 +298,44 @@ def test_sigkill_at_random_moments_leaves_no_set_or_one_complete_set(tmp_path):
         assert main(["segment", str(source), "-o", str(out), "-q", "--force"]) == 0
         assert [p.name for p in out.iterdir() if p.name.startswith(".")] == []
         assert _visible(out) == complete
+
+
+def _nifti_bytes(data, *, extension=None):
+    image = nibabel.Nifti1Image(data, np.eye(4))
+    if extension is not None:
+        image.header.extensions.append(nibabel.nifti1.Nifti1Extension(6, extension))
+    return bytearray(image.to_bytes())
+
+
+def _patched(raw, at, fmt, value):
+    import struct
+
+    raw[at:at + struct.calcsize(fmt)] = struct.pack(fmt, value)
+    return bytes(raw)
+
+
+def _gzip_nrrd(dimension="3", cut=0):
+    import gzip
+
+    body = gzip.compress(np.ascontiguousarray(_blob().transpose(2, 1, 0)).tobytes())
+    header = f"NRRD0004\ntype: uchar\ndimension: {dimension}\nsizes: 12 10 8\nencoding: gzip\n\n"
+    return header.encode() + body[:len(body) - cut]
+
+
+@pytest.mark.parametrize("name, content, message", [
+    ("slope.nii", lambda: _patched(_nifti_bytes(_blob()), 112, "<f", float("inf")),
+     "'scl_slope' field is inf"),
+    ("ext.nii", lambda: _patched(_nifti_bytes(_blob(), extension=b"hello"), 352, "<i", 2**31 - 16),
+     "extension"),
+    ("cut.nii.gz", lambda: __import__("gzip").compress(bytes(_nifti_bytes(_blob())))[:-8],
+     "ends before its gzip trailer"),
+    ("dim.nrrd", lambda: _gzip_nrrd(dimension="2"), "'dimension' field says 2 but 'sizes' lists 3"),
+    ("cut.nrrd", lambda: _gzip_nrrd(cut=8), "ends before its gzip trailer"),
+])
+def test_inconsistent_headers_and_truncated_streams_exit_2_with_one_line(tmp_path, capsys, name,
+                                                                        content, message):
+    (tmp_path / name).write_bytes(content())
+    assert main(["segment", str(tmp_path / name), "-o", str(tmp_path / "out"), "-q"]) == 2
+    line = _one_clean_line(capsys.readouterr().err)
+    assert message in line and name in line
+    assert _visible(tmp_path / "out") == []

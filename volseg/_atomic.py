@@ -24,15 +24,19 @@ def temporary_beside(path) -> Path:
     return Path(tmp)
 
 
-def write_atomically(path, save, *args, **kwargs) -> None:
+def write_atomically(path, save, *args, durable: bool = False, **kwargs) -> None:
     """``save(file, *args, **kwargs)`` into a temporary file beside `path`, then renamed
     to it. The temporary (``<path>.<pid>.<thread>.tmp``) matches no ``*.npz`` or
     ``*.npy`` count of finished blocks, so a leftover of a killed run never looks
-    finished."""
+    finished. `durable`: the file is fsynced before the rename (a power loss then
+    leaves it whole or absent, not renamed and empty)."""
     temporary = f"{path}.{os.getpid()}.{threading.get_ident()}.tmp"
     try:
         with open(temporary, "wb") as file:
             save(file, *args, **kwargs)
+            if durable:
+                file.flush()
+                os.fsync(file.fileno())
         os.replace(temporary, path)
     except BaseException:
         try:

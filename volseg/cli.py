@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 import signal
 import sys
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -363,9 +364,15 @@ def _cmd_info(args):
     volume = load_volume(args.input, args.shape, args.dtype, args.allow_external_data)
     data = volume.data
     frame = volume.frame
+    if hasattr(data, "compute"):          # a Zarr store: one pass over its chunks
+        import dask
+
+        low, high, mean = (v.item() for v in dask.compute(data.min(), data.max(), data.mean()))
+    else:
+        low, high, mean = data.min(), data.max(), data.mean()
     affine = "\n".join("    " + " ".join(f"{v:10.4g}" for v in row) for row in frame.affine)
     print(f"{volume.path}\n  shape (x, y, z): {data.shape}\n  dtype: {data.dtype}\n"
-          f"  range: {data.min()} .. {data.max()} (mean {data.mean():.4g})\n"
+          f"  range: {low} .. {high} (mean {mean:.4g})\n"
           f"  spacing: {volume.spacing}\n  voxel-to-world affine (RAS+, sform code "
           f"{frame.sform_code}, qform code {frame.qform_code}):\n{affine}\n"
           f"  read as: {volume.source}\n  files: {', '.join(map(str, volume.files))}")
@@ -417,7 +424,8 @@ def main(argv=None) -> int:
     # SIGTERM unwinds like Ctrl-C: staging folders are removed, locks released.
     previous = signal.signal(signal.SIGTERM, _raise_interrupt)
     try:
-        return command(args)
+        with _quiet_readers():
+            return command(args)
     except (ValueError, OSError) as err:  # VolumeFileError, OutputError, UsageError, paths
         print(f"volseg: error: {_one_line(err)}", file=sys.stderr)
         return 2
@@ -433,6 +441,24 @@ def main(argv=None) -> int:
         return 1
     finally:
         signal.signal(signal.SIGTERM, previous)
+
+
+@contextmanager
+def _quiet_readers():
+    """nibabel's warnings and log lines (its header fix-ups) off the terminal: what
+    volseg refuses it says in its own one line, and what it accepts needs no second."""
+    import logging
+    import warnings
+
+    logger = logging.getLogger("nibabel")
+    level = logger.level
+    logger.setLevel(logging.CRITICAL)
+    try:
+        with warnings.catch_warnings():
+            warnings.filterwarnings("ignore", module=r"nibabel(\..*)?")
+            yield
+    finally:
+        logger.setLevel(level)
 
 
 def run():

@@ -67,3 +67,28 @@ def test_a_block_not_in_the_folder_is_an_error_naming_it(tmp_path):
     work = WorkFolder(tmp_path / "w", {"input": "abc"})
     with pytest.raises(RuntimeError, match=r"block \(\d, \d, \d\) was expected in the work folder"):
         work.array("never", lazy.chunks, np.float64).compute()
+
+
+@pytest.mark.parametrize("torn", [b"", b"PK\x03\x04 torn", "truncated", "empty archive"])
+def test_a_torn_block_is_computed_again_not_fatal(tmp_path, torn):
+    calls = []
+
+    def block(x, block_id=None):
+        calls.append(block_id)
+        return x * 2, x.sum()
+
+    work = WorkFolder(tmp_path / "w", {"input": "abc"})
+    expected = work.wrap("stage", block)(np.arange(50), block_id=(0, 0, 0))
+    path = tmp_path / "w" / "stage" / "0_0_0.npz"
+    whole = path.read_bytes()
+    if torn == "truncated":          # the zip's CRC or its directory no longer agree
+        torn = whole[: len(whole) // 2]
+    elif torn == "empty archive":
+        np.savez(path)
+        torn = path.read_bytes()
+    path.write_bytes(torn)           # what a power loss or a full disk leaves
+    again = WorkFolder(tmp_path / "w", {"input": "abc"})
+    got = again.wrap("stage", block)(np.arange(50), block_id=(0, 0, 0))
+    assert len(calls) == 2                                   # computed again
+    assert all(np.array_equal(a, b) for a, b in zip(expected, got, strict=True))
+    assert path.read_bytes() == whole                        # and saved whole

@@ -220,3 +220,68 @@ def test_cli_blockwise_checks_the_free_disk_first(tmp_path, volume, capsys, monk
     assert sorted(p for p in os.listdir(out) if not p.startswith(".")) == [
         "vol_curvature.nii.gz", "vol_curvature.zarr", "vol_labels.nii.gz", "vol_labels.zarr",
         "vol_preview.png", "vol_summary.json"]
+
+
+# ---------------------------------------------------------------- hostile stores (issue 27)
+
+
+def _v2_store(path, shape, chunks):
+    path.mkdir()
+    (path / ".zarray").write_text(json.dumps({
+        "zarr_format": 2, "shape": shape, "chunks": chunks, "dtype": "|u1",
+        "compressor": None, "fill_value": 0, "filters": None, "order": "C"}))
+    return path
+
+
+@pytest.mark.parametrize("shape, chunks, message", [
+    ([24, 2147483648, 0], [24, 8, 8], "at least 2 samples along each axis"),
+    ([16, 16, 16], [0, 8, 8], "every chunk size must be at least 1"),
+    ([10**6] * 3, [1, 1, 1], "chunks of [1, 1, 1] declared"),
+])
+def test_store_metadata_is_checked_before_any_chunk_is_listed(tmp_path, capsys, shape, chunks,
+                                                               message):
+    import time
+
+    store = _v2_store(tmp_path / "bad.zarr", shape, chunks)
+    started = time.perf_counter()
+    assert main(["info", str(store)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and message in err and str(store) in err
+    assert time.perf_counter() - started < 5
+
+
+def test_a_shard_missing_inner_chunks_is_refused(tmp_path):
+    import zarr
+
+    store = zarr.create_array(str(tmp_path / "s.zarr"), shape=(10, 9, 8), chunks=(4, 4, 4),
+                              shards=(8, 8, 8), dtype="uint8", fill_value=0)
+    store[:] = 1                       # every inner chunk written (edge shards included) ...
+    assert read_volume(tmp_path / "s.zarr").data.compute().min() == 1
+    store[:4, :4, :4] = 0              # ... then one left empty: Zarr drops it from its shard
+    with pytest.raises(VolumeFileError, match="1 inner chunks of its shards are missing"):
+        read_volume(tmp_path / "s.zarr")
+
+
+def test_a_chunk_linked_outside_the_store_is_refused_unless_allowed(tmp_path, capsys):
+    import zarr
+
+    store = zarr.create_array(str(tmp_path / "l.zarr"), shape=(8, 8, 8), chunks=(4, 4, 4),
+                              dtype="uint8", config={"write_empty_chunks": True})
+    store[:] = 2
+    chunk = tmp_path / "l.zarr" / "c" / "0" / "0" / "0"
+    outside = tmp_path / "elsewhere.bin"
+    outside.write_bytes(chunk.read_bytes())
+    chunk.unlink()
+    chunk.symlink_to(outside)
+    assert main(["segment", str(tmp_path / "l.zarr"), "-o", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert "outside the store" in err and "--allow-external-data" in err
+    assert read_volume(tmp_path / "l.zarr", allow_external_data=True).data.compute().min() == 2
+
+
+def test_info_on_a_zarr_store(tmp_path, capsys):
+    write_zarr(tmp_path / "v.zarr", np.arange(60, dtype=np.uint8).reshape(5, 4, 3),
+               chunks=(2, 2, 2))
+    assert main(["info", str(tmp_path / "v.zarr")]) == 0
+    out = capsys.readouterr().out
+    assert "range: 0 .. 59 (mean 29.5)" in out and "shape (x, y, z): (5, 4, 3)" in out

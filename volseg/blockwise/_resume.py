@@ -11,8 +11,10 @@ bit for bit.
 with its result (an array or a tuple of arrays) saved as
 ``<stage>/<i>_<j>_<k>.npz`` when computed, and loaded instead of computed when
 present. A file appears by atomic rename once complete, so a run killed mid-write
-leaves no block that looks finished. The pipeline removes the folder once its
-outputs are committed.
+leaves no block that looks finished, and it is fsynced first, so a power loss
+leaves it whole or absent; a torn block found anyway (empty, truncated: its zip
+CRCs disagree) is removed and computed again. The pipeline removes the folder once
+its outputs are committed.
 """
 
 from __future__ import annotations
@@ -78,15 +80,36 @@ class _Cached:
     def __call__(self, *blocks, block_id=None):
         path = os.path.join(self.folder, "_".join(map(str, block_id)) + ".npz")
         if os.path.exists(path):
-            with np.load(path) as saved:
-                if "array" in saved.files:
-                    return saved["array"]
-                return tuple(saved[f"item{i}"] for i in range(len(saved.files)))
+            saved = _load(path)
+            if saved is not None:
+                return saved
         result = self.function(*blocks, block_id=block_id)
         items = ({"array": result} if isinstance(result, np.ndarray)
                  else {f"item{i}": np.asarray(r) for i, r in enumerate(result)})
-        write_atomically(path, np.savez, **items)
+        write_atomically(path, np.savez, durable=True, **items)
         return result
+
+
+def _load(path):
+    """A saved block, or None (the file removed) when it is torn: empty, truncated or
+    not what `_Cached` writes (what a power loss or a full disk leaves). Its zip
+    members carry CRCs, so a torn block is not read as data."""
+    import zipfile
+
+    try:
+        with open(path, "rb") as file, np.load(file) as saved:   # closed on any error
+            if "array" in saved.files:
+                return saved["array"]
+            items = tuple(saved[f"item{i}"] for i in range(len(saved.files)))
+            if not items:
+                raise ValueError("no arrays")
+            return items
+    except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile):
+        try:
+            os.unlink(path)
+        except OSError:
+            pass
+        return None
 
 
 def _not_saved(*blocks, block_id=None):

@@ -131,14 +131,25 @@ def read_exact(path: Path, offset: int, shape, dtype: np.dtype, mapped: bool = F
     return flat
 
 
+#: Bytes a NIfTI's gzip stream may hold past its voxels (decompressed to reach the
+#: trailer's CRC, then dropped).
+GZIP_SLACK = 1 << 20
+
+
 def gunzip_bounded(path: Path, offset: int, expected: int, *, exact: bool = True) -> bytes:
     """Decompress the gzip (or zlib) stream at `offset`, in pieces, stopping as soon as
     it yields more than `expected` bytes; a shorter stream is refused, and so is a
     longer one when `exact` (else only the first `expected` bytes are kept).
 
-    Concatenated gzip members are read as one stream, as gzip does.
+    Concatenated gzip members are read as one stream, as gzip does. The stream must
+    end with its trailer, whose CRC and length zlib checks: a truncated file is
+    refused even when its first `expected` bytes are there. Without `exact`, up to
+    `GZIP_SLACK` more bytes are decompressed (and dropped) to reach it.
     """
     out = bytearray()
+    kept = expected
+    if not exact:
+        expected += GZIP_SLACK
     decoder = zlib.decompressobj(wbits=47)  # gzip or zlib header, detected
     try:
         with open(path, "rb") as handle:
@@ -152,11 +163,9 @@ def gunzip_bounded(path: Path, offset: int, expected: int, *, exact: bool = True
                 out += decoder.decompress(pending, expected + 1 - len(out))
                 pending = decoder.unconsumed_tail
                 if len(out) > expected:
-                    if not exact:
-                        return bytes(out[:expected])
                     raise VolumeFileError(
-                        f"{path}: the compressed data hold more than the {expected} bytes "
-                        "the header declares")
+                        f"{path}: the compressed data hold more than the {kept} bytes "
+                        "the header declares" + ("" if exact else f" (+{GZIP_SLACK})"))
                 if decoder.eof:  # another gzip member may follow; anything else ends it
                     pending = decoder.unused_data + pending
                     if len(pending) < 2:
@@ -166,10 +175,16 @@ def gunzip_bounded(path: Path, offset: int, expected: int, *, exact: bool = True
                     decoder = zlib.decompressobj(wbits=47)
     except zlib.error as err:
         raise VolumeFileError(f"{path}: corrupt compressed data ({err})") from None
-    if len(out) != expected:
+    except OverflowError:
+        raise VolumeFileError(f"{path}: the header declares a size the decompressor cannot "
+                              "take") from None
+    if len(out) < kept or (exact and len(out) != kept):
         raise VolumeFileError(
-            f"{path}: expected {expected} bytes after decompression, found {len(out)}")
-    return bytes(out)
+            f"{path}: expected {kept} bytes after decompression, found {len(out)}")
+    if not decoder.eof:
+        raise VolumeFileError(f"{path}: the compressed stream ends before its gzip trailer "
+                              "(a truncated file; its checksum cannot be verified)")
+    return bytes(out[:kept])
 
 
 class MappedArray:

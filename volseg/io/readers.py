@@ -198,6 +198,12 @@ def _read_nrrd(path: Path, shape, dtype, byte_order, allow_external, mapped=Fals
         raise VolumeFileError(f"{path}: not an NRRD file (no 'NRRD' magic)")
     fields = _key_values(path, head.decode("latin-1").replace("\r", "").split("\n", 1)[-1])
     sizes = _numbers(path, "sizes", fields.get("sizes"), None, int)
+    if "dimension" not in fields:
+        raise VolumeFileError(f"{path}: the 'dimension' field is missing (NRRD requires it)")
+    dimension = _numbers(path, "dimension", fields["dimension"], 1, int)[0]
+    if dimension != len(sizes):
+        raise VolumeFileError(f"{path}: the 'dimension' field says {dimension} but 'sizes' "
+                              f"lists {len(sizes)} sizes ({' '.join(map(str, sizes))})")
     type_name = fields.get("type", "").lower()
     if type_name not in NRRD_TYPES:
         raise VolumeFileError(f"{path}: the 'type' field {fields.get('type')!r} is not a "
@@ -266,11 +272,15 @@ def _read_nifti(path: Path, shape, dtype, byte_order, allow_external, mapped=Fal
     if path.name.lower().endswith(".gz"):
         # Decompress only what the header declares, in bounded pieces.
         payload = gunzip_bounded(path, 0, expected, exact=False)
+        _check_nifti_extensions(path, payload[:offset], offset, header.endianness)
         image = type(image).from_bytes(payload)
     elif regular_file_size(path) < expected:
         raise VolumeFileError(f"{path}: expected {expected} bytes for shape {data_shape} of "
                               f"{dt.name} (+{offset} header bytes), found "
                               f"{regular_file_size(path)}")
+    else:
+        with open(path, "rb") as handle:
+            _check_nifti_extensions(path, handle.read(offset), offset, header.endianness)
     try:
         data = np.asanyarray(image.dataobj)
         sform, sform_code = image.header.get_sform(coded=True)
@@ -287,6 +297,39 @@ def _read_nifti(path: Path, shape, dtype, byte_order, allow_external, mapped=Fal
         raise VolumeFileError(f"{path}: the NIfTI affine: {err}") from None
     name = path.name[: -len(".nii.gz")] if path.name.lower().endswith(".nii.gz") else path.stem
     return data, frame, name, f"NIfTI {data.dtype}", (path,)
+
+
+def _check_nifti_scaling(path, head: bytes, endianness: str):
+    """No infinite scaling field (read from the file's bytes: nibabel fixes the header
+    it loads, silently reading an infinite ``scl_slope`` as no scaling). NaN is what
+    nibabel itself writes for "unset", and a slope of 0 means none, by the standard:
+    both are read as no scaling."""
+    end = "<" if endianness == "<" else ">"
+    for field, at in (("scl_slope", 112), ("scl_inter", 116)):
+        value = float(np.frombuffer(head[at:at + 4], dtype=f"{end}f4")[0])
+        if np.isinf(value):
+            raise VolumeFileError(f"{path}: the NIfTI '{field}' field is {value}; a scaling "
+                                  "factor must be a finite number (0 slope or NaN: none)")
+
+
+def _check_nifti_extensions(path, head: bytes, offset: int, endianness: str):
+    """Finite scaling (`_check_nifti_scaling`), and the extensions between the 348-byte
+    header and 'vox_offset' fit there: each declares its size (a multiple of 16, at
+    least 8), and none may run into the voxels (nibabel would then read part of an
+    extension as data, or data as one)."""
+    _check_nifti_scaling(path, head, endianness)
+    if len(head) < 352 or head[348] == 0:
+        return                                    # no extension flag: nothing between
+    end = "<" if endianness == "<" else ">"
+    position = 352
+    while position + 8 <= offset:
+        size = int(np.frombuffer(head[position:position + 4], dtype=f"{end}i4")[0])
+        if size < 8 or size % 16 or position + size > offset:
+            raise VolumeFileError(
+                f"{path}: a NIfTI extension at byte {position} declares {size} bytes, which "
+                f"do not fit before the voxels at 'vox_offset' {offset} (sizes are multiples "
+                "of 16)")
+        position += size
 
 
 def _read_npy(path: Path, shape, dtype, byte_order, allow_external, mapped=False):
@@ -371,7 +414,8 @@ def read_volume(path, *, shape=None, dtype=None, byte_order=None,
         Of raw data; little-endian by default.
     allow_external_data : bool
         Let a detached header (``.nhdr`` ``data file:``, ``.dat`` ``ObjectFileName:``)
-        name a data file outside its own folder. Off by default: a header from
+        name a data file outside its own folder, or a Zarr store hold links to files
+        outside it. Off by default: a header from
         elsewhere cannot make volseg read, and publish a checksum of, any file.
     chunks : int or tuple, optional
         Read lazily: the Volume's data is a Dask array of these chunks (for the
@@ -412,7 +456,8 @@ def read_volume(path, *, shape=None, dtype=None, byte_order=None,
     from .zarr_store import is_zarr, read_zarr
 
     if is_zarr(path):
-        return read_zarr(path)   # lazy: a Dask array over the store's chunks
+        # lazy: a Dask array over the store's chunks
+        return read_zarr(path, allow_external_data=allow_external_data)
     regular_file_size(path)  # missing, a folder, a device or a pipe: refused before opening
     try:
         data, frame, short, source, files = _reader(path)(

@@ -58,8 +58,17 @@ def _ome_level0(group, path):
     return array, axes, factors
 
 
-def read_zarr(path) -> Volume:
-    """Open a Zarr array or OME-Zarr image as a lazily read `Volume` (see the module)."""
+#: A store declaring more chunks than this is refused before any is listed (the
+#: count alone bounds the time of the checks; 4096^3 in 16^3 chunks is 2^24).
+MAX_CHUNKS = 2**24
+
+
+def read_zarr(path, *, allow_external_data: bool = False) -> Volume:
+    """Open a Zarr array or OME-Zarr image as a lazily read `Volume` (see the module).
+
+    `allow_external_data`: let the store hold links to files outside it (refused by
+    default: a store from elsewhere cannot make volseg read, and publish a checksum
+    of, any file)."""
     import dask.array as da
     import zarr
 
@@ -98,11 +107,16 @@ def read_zarr(path) -> Volume:
     dtype = np.dtype(array.dtype)
     if dtype.kind not in "biuf":
         raise VolumeFileError(f"{path}: voxel type {dtype} is not a real number type")
+    _check_layout(array, path, order)
+    if not allow_external_data:
+        _refuse_links_out(path)
     if array.nchunks_initialized < array.nchunks:
         raise VolumeFileError(
             f"{path}: {array.nchunks - array.nchunks_initialized} of {array.nchunks} chunks are "
             f"missing; Zarr would read them as the fill value {array.fill_value!r} (rewrite the "
             "store with every chunk written)")
+    if getattr(array, "shards", None) is not None:
+        _check_shards(array, path)
     lazy = da.from_array(_Checked(array, path), chunks=array.chunks, asarray=True,
                          fancy=False, name=f"zarr-{path.name}-{id(array)}")
     if order is not None:
@@ -115,6 +129,85 @@ def read_zarr(path) -> Volume:
     name = path.name[:-5] if path.name.endswith(".zarr") else path.name
     return Volume(lazy, frame=frame or Frame.from_spacing((1.0, 1.0, 1.0)), name=name,
                   source=f"Zarr {dtype} chunks {array.chunks}", path=path, files=(path,))
+
+
+def _check_layout(array, path, order):
+    """Shape and chunks from the metadata alone, before any chunk is listed: every
+    axis at least 1 (the spatial ones 2), chunks at least 1, at most `MAX_CHUNKS`."""
+    shape, chunks = tuple(array.shape), tuple(array.chunks)
+    spatial = range(array.ndim) if order is None else order
+    if any(s < 1 for s in shape) or any(shape[i] < 2 for i in spatial):
+        raise VolumeFileError(f"{path}: the volume needs at least 2 samples along each axis, "
+                              f"got shape {shape}")
+    if len(chunks) != len(shape) or any(c < 1 for c in chunks):
+        raise VolumeFileError(f"{path}: chunk shape {list(chunks)} for shape {list(shape)}: "
+                              "every chunk size must be at least 1")
+    count = int(np.prod([-(-s // c) for s, c in zip(shape, chunks, strict=True)], dtype=object))
+    if count > MAX_CHUNKS:
+        raise VolumeFileError(f"{path}: {count} chunks of {list(chunks)} declared (at most "
+                              f"{MAX_CHUNKS}); rechunk the store into larger chunks")
+
+
+def _refuse_links_out(path):
+    """A link in the store that leads outside it is refused (without following links
+    into folders: a link to a folder is itself checked)."""
+    import os
+
+    root = os.path.realpath(path)
+    for top, folders, files in os.walk(path):
+        for name in folders + files:
+            entry = os.path.join(top, name)
+            if os.path.islink(entry):
+                target = os.path.realpath(entry)
+                if os.path.commonpath([root, target]) != root:
+                    raise VolumeFileError(
+                        f"{entry}: a link to {target}, outside the store; copy the data into "
+                        "the store, or pass --allow-external-data")
+
+
+def _check_shards(array, path):
+    """Every inner chunk of a sharded (Zarr v3) array present: Zarr counts shards, and
+    fills an inner chunk missing from its shard's index with the fill value. Each
+    shard's index (16 bytes per inner chunk, at its start or end) is read."""
+    import itertools
+
+    codec = array.metadata.codecs[0]
+    inner = tuple(codec.chunk_shape)
+    shard = tuple(array.shards)
+    per = tuple(s // c for s, c in zip(shard, inner, strict=True))
+    n_inner = int(np.prod(per))
+    crc = any(type(c).__name__ == "Crc32cCodec" for c in codec.index_codecs)
+    index_bytes = 16 * n_inner + (4 if crc else 0)
+    at_end = str(getattr(codec.index_location, "value", codec.index_location)) == "end"
+    missing = 0
+    grid = [range(-(-n // s)) for n, s in zip(array.shape, shard, strict=True)]
+    for where in itertools.product(*grid):
+        # Inner chunks of this shard that lie inside the array (an edge shard has fewer).
+        inside = np.ones(per, dtype=bool)
+        for axis, (w, s, c, n) in enumerate(zip(where, shard, inner, array.shape, strict=True)):
+            starts = w * s + np.arange(per[axis]) * c
+            view = [slice(None)] * len(per)
+            view[axis] = starts >= n
+            inside[tuple(view)] = False
+        file = path / array.metadata.encode_chunk_key(where)
+        try:
+            with open(file, "rb") as handle:
+                size = handle.seek(0, 2)
+                if size < index_bytes:
+                    raise VolumeFileError(f"{file}: a shard of {size} bytes cannot hold its "
+                                          f"index of {index_bytes} bytes")
+                handle.seek(size - index_bytes if at_end else 0)
+                index = np.frombuffer(handle.read(16 * n_inner), dtype="<u8")
+        except FileNotFoundError:
+            missing += int(inside.sum())
+            continue
+        empty = (index.reshape(per + (2,)) == np.iinfo(np.uint64).max).all(axis=-1)
+        missing += int((empty & inside).sum())
+    if missing:
+        raise VolumeFileError(
+            f"{path}: {missing} inner chunks of its shards are missing; Zarr would read them "
+            f"as the fill value {array.fill_value!r} (rewrite the store with every chunk "
+            "written)")
 
 
 class _Checked:
