@@ -339,3 +339,75 @@ def test_inconsistent_headers_and_truncated_streams_exit_2_with_one_line(tmp_pat
     line = _one_clean_line(capsys.readouterr().err)
     assert message in line and name in line
     assert _visible(tmp_path / "out") == []
+
+
+def test_an_input_rewritten_during_the_run_is_refused_and_nothing_written(tmp_path, capsys,
+                                                                          monkeypatch):
+    import volseg.files as files
+
+    source = _raw(tmp_path / "r_12x10x8_uint8.raw", _blob())
+    real = files.run_stages
+
+    def rewritten(*args, **kwargs):
+        result = real(*args, **kwargs)
+        source.write_bytes(source.read_bytes()[::-1])       # another process's new version
+        return result
+
+    monkeypatch.setattr(files, "run_stages", rewritten)
+    assert main(["segment", str(source), "-o", str(tmp_path / "out"), "-q"]) == 2
+    line = _one_clean_line(capsys.readouterr().err)
+    assert "changed while volseg read it" in line and source.name in line
+    assert _visible(tmp_path / "out") == []
+    monkeypatch.undo()
+    assert main(["segment", str(source), "-o", str(tmp_path / "out"), "-q"]) == 0
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--memory-limit", "inf"], "--memory-limit must be a positive finite size"),
+    (["--memory-limit", "nan"], "--memory-limit must be a positive finite size"),
+    (["--scheduler", "tls://127.0.0.1:1"], "cannot reach the Dask scheduler"),
+])
+def test_bad_engine_options_exit_2_even_for_an_in_memory_input(tmp_path, capsys, argv, message):
+    source = _raw(tmp_path / "e_12x10x8_uint8.raw", _blob())
+    assert main(["segment", str(source), "-o", str(tmp_path / "out"), "-q", *argv]) == 2
+    assert message in _one_clean_line(capsys.readouterr().err)
+    assert _visible(tmp_path / "out") == []
+
+
+@pytest.mark.slow
+def test_a_scheduler_that_accepts_and_never_answers_is_given_up(tmp_path):
+    import socket
+    import time
+
+    from volseg.blockwise.engine import Engine
+    from volseg.errors import EngineError
+
+    server = socket.socket()
+    server.bind(("127.0.0.1", 0))
+    server.listen(5)
+    address = "tcp://127.0.0.1:%d" % server.getsockname()[1]
+    started = time.monotonic()
+    with pytest.raises(EngineError, match="no answer within"):
+        Engine(address, timeout=0.5).check()
+    assert time.monotonic() - started < 20
+    server.close()
+
+
+def test_odd_zarr_metadata_and_arguments_are_refused_by_name(tmp_path, capsys):
+    import zarr
+
+    from volseg.io import read_volume
+
+    store = zarr.create_array(str(tmp_path / "a.zarr"), shape=(8, 8, 8), chunks=(4, 4, 4),
+                              dtype="uint8", config={"write_empty_chunks": True})
+    store[:] = 1
+    store.attrs["volseg"] = "xyz"
+    assert main(["info", str(tmp_path / "a.zarr")]) == 2
+    assert "'volseg' attribute must be an object" in _one_clean_line(capsys.readouterr().err)
+    group = zarr.open_group(str(tmp_path / "g.zarr"), mode="w")
+    group.create_group("0")
+    group.attrs["multiscales"] = [{"axes": ["z", "y", "x"], "datasets": [{"path": "0"}]}]
+    assert main(["info", str(tmp_path / "g.zarr")]) == 2
+    assert "is a group, not an array" in _one_clean_line(capsys.readouterr().err)
+    with pytest.raises(ValueError, match="`chunks` must be a positive whole number"):
+        read_volume(_raw(tmp_path / "c_12x10x8_uint8.raw", _blob()), chunks=0)

@@ -249,6 +249,7 @@ def _cmd_segment(args):
     _check_cut_options(args)
     engine = Engine(args.scheduler, workers=args.workers, memory_limit=args.memory_limit,
                     progress=not args.quiet and sys.stderr.isatty())   # arguments checked here
+    engine.check()
     # Read and check every input before writing or computing anything.
     if args.chunks is not None and args.chunks < 2:
         raise UsageError(f"--chunks must be at least 2 voxels, got {args.chunks}")

@@ -213,6 +213,7 @@ def segment_to_files(volume, outputs, *, operator="weighted", n_regions=None,
         value_scale=value_scale, spacing=volume.spacing, padding=padding, mask=mask,
         smooth_sigma=smooth_sigma, measure=measure, threshold=threshold,
         min_component=min_component, dtype=dtype)
+    read_as = _file_states(volume.files)      # before the checksum reads them
     name, checksum = volume.name, files_sha256(volume.files)
     frame = volume.frame or Frame.from_spacing(request.spacing)
     done = {}
@@ -224,15 +225,7 @@ def segment_to_files(volume, outputs, *, operator="weighted", n_regions=None,
         blocks = f" in {storage.chunks} blocks" if lazy else ""
         say(f"{name}: curvature ({request.operator.name}) and Morse complex of a "
             f"{'x'.join(map(str, data.shape))} volume{blocks}")
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always", UserWarning)
-            result, value_range = run_stages(data, request, storage)
-        for warning in caught:        # one line each (fewer maxima than asked, ...)
-            if issubclass(warning.category, UserWarning):
-                say(f"{name}: warning: {warning.message}")
-            else:
-                warnings.warn_explicit(warning.message, warning.category, warning.filename,
-                                       warning.lineno)
+        result, value_range = _stages_saying_warnings(data, request, storage, name, say)
         say(f"{name}: {result.n_regions} regions{result.mask.phrase()} from "
             f"{len(result.hierarchy.maxima)} maxima; writing")
         info = summary(result, name=name, source=volume.path, checksum=checksum,
@@ -249,11 +242,52 @@ def segment_to_files(volume, outputs, *, operator="weighted", n_regions=None,
                            title=result_title(name, result, blockwise=lazy,
                                               spread=info["spread"]),
                            value_range=value_range)
+        _unchanged(volume.files, read_as)     # else nothing is committed
         done["info"], done["storage"] = info, storage
 
     outputs.commit(write)
     done["storage"].finish()
     return done["info"]
+
+
+def _stages_saying_warnings(data, request, storage, name, say):
+    """`run_stages`, its UserWarnings (fewer maxima than asked, ...) said as one line
+    each rather than printed by Python with their source line."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", UserWarning)
+        out = run_stages(data, request, storage)
+    for warning in caught:
+        if issubclass(warning.category, UserWarning):
+            say(f"{name}: warning: {warning.message}")
+        else:
+            warnings.warn_explicit(warning.message, warning.category, warning.filename,
+                                   warning.lineno)
+    return out
+
+
+def _file_states(paths) -> dict:
+    """(size, mtime in ns, inode) of every file of an input, a store's files included."""
+    states = {}
+    for path in map(Path, paths):
+        files = sorted(p for p in path.rglob("*") if p.is_file()) if path.is_dir() else [path]
+        for file in files:
+            info = os.stat(file)
+            states[str(file)] = (info.st_size, info.st_mtime_ns, info.st_ino)
+    return states
+
+
+def _unchanged(paths, before: dict) -> None:
+    """Refuse an input whose files changed while the run read them (the labels would
+    be of neither version, the checksum of the old one)."""
+    after = _file_states(paths)
+    if after != before:
+        changed = sorted(set(after) ^ set(before)) or sorted(
+            f for f in after if after[f] != before[f])
+        from .io import VolumeFileError
+
+        raise VolumeFileError(f"{changed[0]}: changed while volseg read it (size or "
+                              "modification time); nothing was written. Run again once "
+                              "it is complete")
 
 
 def _storage(volume, data, request, paths, outputs, checksum, engine, say):

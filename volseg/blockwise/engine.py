@@ -34,6 +34,7 @@ progress bar on stderr, named by the stage, when `progress` is true.
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 import sys
 from concurrent.futures import ThreadPoolExecutor
@@ -92,9 +93,32 @@ def parse_bytes(text) -> int:
         except (TypeError, ValueError):
             raise EngineError(f"--memory-limit {text!r}: expected bytes (e.g. 12GB, 800MiB) "
                               "or a share of RAM below 1 (e.g. 0.5)") from None
-    if value <= 0:
-        raise EngineError(f"--memory-limit must be positive, got {text!r}")
+    if not (value > 0 and math.isfinite(value)):            # NaN, inf, 0, negative
+        raise EngineError(f"--memory-limit must be a positive finite size, got {text!r}")
     return int(value * physical_memory()) if value < 1 else int(value)
+
+
+def _within(seconds: float, make):
+    """`make()` in a thread, or TimeoutError after `seconds` (a server that accepts the
+    connection and never answers holds distributed's Client past its own timeout)."""
+    import threading
+
+    outcome = {}
+
+    def run():
+        try:
+            outcome["value"] = make()
+        except BaseException as err:  # noqa: BLE001 - handed to the caller
+            outcome["error"] = err
+
+    thread = threading.Thread(target=run, daemon=True, name="volseg-connect")
+    thread.start()
+    thread.join(seconds)
+    if thread.is_alive():
+        raise TimeoutError(f"no answer within {seconds:g} s")
+    if "error" in outcome:
+        raise outcome["error"]
+    return outcome["value"]
 
 
 class Engine:
@@ -152,6 +176,13 @@ class Engine:
         self._stack.close()
         self.client = None
 
+    def check(self) -> None:
+        """For a scheduler address: connect once now, so that an unreachable one is an
+        `EngineError` before anything is read, whichever path the inputs take."""
+        if not self.threaded and self.scheduler != "local":
+            with self:
+                pass
+
     def _client(self):
         import logging
 
@@ -166,8 +197,10 @@ class Engine:
         if self.scheduler != "local":
             previous = dask.config.get("scheduler", None)
             try:
-                return Client(self.scheduler, timeout=f"{self.timeout}s")
-            except (OSError, TimeoutError, ValueError) as err:
+                return _within(self.timeout + 5.0, lambda: Client(
+                    self.scheduler, timeout=f"{self.timeout}s"))
+            except Exception as err:  # noqa: BLE001 - any failure to connect (an echo
+                # server, a tls:// address without certificates, ...) is the address's
                 # The Client made itself Dask's default before it tried to connect, and
                 # leaves that behind when it fails: every later compute would then ask
                 # for a client that does not exist.

@@ -453,6 +453,12 @@ def read_volume(path, *, shape=None, dtype=None, byte_order=None,
         shape = tuple(int(s) for s in shape)
         if len(shape) != 3 or min(shape) < 1:
             raise ValueError(f"`shape` must be three positive sizes (X, Y, Z), got {shape}")
+    if chunks is not None:
+        sizes = (chunks,) * 3 if np.ndim(chunks) == 0 else tuple(chunks)
+        if (len(sizes) != 3 or any(isinstance(c, bool) or not isinstance(c, (int, np.integer))
+                                   or c < 1 for c in sizes)):
+            raise ValueError(f"`chunks` must be a positive whole number of voxels (or three), "
+                             f"got {chunks!r}")
     from .zarr_store import is_zarr, read_zarr
 
     if is_zarr(path):

@@ -47,9 +47,12 @@ def _ome_level0(group, path):
             if transform.get("type") == "scale":
                 factors = [float(f) for f in transform["scale"]]
         array = group[level["path"]]
-    except (KeyError, IndexError, TypeError, ValueError) as err:
+    except (KeyError, IndexError, TypeError, ValueError, AttributeError) as err:
         raise VolumeFileError(f"{path}: malformed OME-Zarr 'multiscales' metadata "
-                              f"({err})") from None
+                              f"({type(err).__name__}: {err})") from None
+    if not hasattr(array, "ndim"):
+        raise VolumeFileError(f"{path}: the OME-Zarr level-0 dataset {level['path']!r} is a "
+                              "group, not an array")
     if not axes:
         axes = ["t", "c", "z", "y", "x"][-array.ndim:]
     if len(axes) != array.ndim or len(factors) != array.ndim:
@@ -61,6 +64,40 @@ def _ome_level0(group, path):
 #: A store declaring more chunks than this is refused before any is listed (the
 #: count alone bounds the time of the checks; 4096^3 in 16^3 chunks is 2^24).
 MAX_CHUNKS = 2**24
+
+
+def _array_of(node, path):
+    """(the array, the order of its x, y, z axes or None, its frame or None) of an opened
+    Zarr node: an OME-Zarr image's level 0, or an array with volseg's attributes."""
+    import zarr
+
+    frame = None
+    if isinstance(node, zarr.Group):
+        array, axes, factors = _ome_level0(node, path)
+        keep = [i for i, name in enumerate(axes) if name in ("x", "y", "z")]
+        extra = [i for i, name in enumerate(axes) if name not in ("x", "y", "z")]
+        if len(keep) != 3 or any(array.shape[i] != 1 for i in extra):
+            raise VolumeFileError(f"{path}: OME-Zarr image of axes {axes} and shape {array.shape}: "
+                                  "volseg needs three spatial axes x, y, z (other axes of size 1)")
+        order = [keep[[axes[i] for i in keep].index(name)] for name in ("x", "y", "z")]
+        spacing = tuple(factors[i] for i in order)
+        frame = Frame.from_spacing(spacing)
+    else:
+        array = node
+        attrs = dict(array.attrs).get("volseg", {})
+        if not isinstance(attrs, dict):
+            raise VolumeFileError(f"{path}: the 'volseg' attribute must be an object (axes, "
+                                  f"spacing, affine), got {type(attrs).__name__}")
+        order = None
+        if attrs.get("axes", "xyz") != "xyz":
+            raise VolumeFileError(f"{path}: volseg axes attribute {attrs.get('axes')!r}; expected "
+                                  "'xyz'")
+        if "affine" in attrs:
+            try:
+                frame = Frame(np.asarray(attrs["affine"], dtype=np.float64))
+            except (ValueError, TypeError) as err:
+                raise VolumeFileError(f"{path}: the 'affine' attribute: {err}") from None
+    return array, order, frame
 
 
 def read_zarr(path, *, allow_external_data: bool = False) -> Volume:
@@ -78,29 +115,7 @@ def read_zarr(path, *, allow_external_data: bool = False) -> Volume:
     except Exception as err:  # noqa: BLE001 - any failure to open is the store's
         raise VolumeFileError(f"{path}: not a readable Zarr store ({type(err).__name__}: "
                               f"{err})") from None
-    frame = None
-    if isinstance(node, zarr.Group):
-        array, axes, factors = _ome_level0(node, path)
-        keep = [i for i, name in enumerate(axes) if name in ("x", "y", "z")]
-        extra = [i for i, name in enumerate(axes) if name not in ("x", "y", "z")]
-        if len(keep) != 3 or any(array.shape[i] != 1 for i in extra):
-            raise VolumeFileError(f"{path}: OME-Zarr image of axes {axes} and shape {array.shape}: "
-                                  "volseg needs three spatial axes x, y, z (other axes of size 1)")
-        order = [keep[[axes[i] for i in keep].index(name)] for name in ("x", "y", "z")]
-        spacing = tuple(factors[i] for i in order)
-        frame = Frame.from_spacing(spacing)
-    else:
-        array = node
-        attrs = dict(array.attrs).get("volseg", {})
-        order = None
-        if attrs.get("axes", "xyz") != "xyz":
-            raise VolumeFileError(f"{path}: volseg axes attribute {attrs.get('axes')!r}; expected "
-                                  "'xyz'")
-        if "affine" in attrs:
-            try:
-                frame = Frame(np.asarray(attrs["affine"], dtype=np.float64))
-            except (ValueError, TypeError) as err:
-                raise VolumeFileError(f"{path}: the 'affine' attribute: {err}") from None
+    array, order, frame = _array_of(node, path)
     if array.ndim != 3 and order is None:
         raise VolumeFileError(f"{path}: the Zarr array is {array.ndim}-D (shape {array.shape}); "
                               "volseg needs a 3-D volume")
