@@ -411,3 +411,28 @@ def test_odd_zarr_metadata_and_arguments_are_refused_by_name(tmp_path, capsys):
     assert "is a group, not an array" in _one_clean_line(capsys.readouterr().err)
     with pytest.raises(ValueError, match="`chunks` must be a positive whole number"):
         read_volume(_raw(tmp_path / "c_12x10x8_uint8.raw", _blob()), chunks=0)
+
+
+@pytest.mark.parametrize("value, message", [
+    (np.nan, "holds NaN or infinite values (its range is nan .. nan)"),
+    (np.inf, "holds NaN or infinite values"),
+])
+def test_a_store_with_nan_or_inf_says_so(tmp_path, capsys, value, message):
+    from volseg.io import write_zarr
+
+    data = np.random.default_rng(0).random((20, 20, 20)).astype(np.float32)
+    data[3, 4, 5] = value
+    write_zarr(tmp_path / "v.zarr", data, chunks=(8, 8, 8))
+    assert main(["segment", str(tmp_path / "v.zarr"), "-o", str(tmp_path / "out"), "-q"]) == 2
+    line = _one_clean_line(capsys.readouterr().err)
+    assert message in line and "v.zarr" in line and "mask" not in line
+    assert _visible(tmp_path / "out") == []
+
+
+def test_denormal_values_ask_for_a_value_scale(tmp_path, capsys):
+    np.save(tmp_path / "d.npy", np.random.default_rng(0).random((12, 10, 8)) * 1e-310)
+    assert main(["segment", str(tmp_path / "d.npy"), "-o", str(tmp_path / "out"), "-q"]) == 2
+    line = _one_clean_line(capsys.readouterr().err)
+    assert "give one (value_scale, --value-scale)" in line and "d.npy" in line
+    assert main(["segment", str(tmp_path / "d.npy"), "-o", str(tmp_path / "out"), "-q",
+                 "--value-scale", "1e308"]) == 0

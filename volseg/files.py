@@ -225,7 +225,8 @@ def segment_to_files(volume, outputs, *, operator="weighted", n_regions=None,
         blocks = f" in {storage.chunks} blocks" if lazy else ""
         say(f"{name}: curvature ({request.operator.name}) and Morse complex of a "
             f"{'x'.join(map(str, data.shape))} volume{blocks}")
-        result, value_range = _stages_saying_warnings(data, request, storage, name, say)
+        result, value_range = _stages_saying_warnings(data, request, storage, name, say,
+                                                      str(volume.path or name))
         say(f"{name}: {result.n_regions} regions{result.mask.phrase()} from "
             f"{len(result.hierarchy.maxima)} maxima; writing")
         info = summary(result, name=name, source=volume.path, checksum=checksum,
@@ -250,12 +251,12 @@ def segment_to_files(volume, outputs, *, operator="weighted", n_regions=None,
     return done["info"]
 
 
-def _stages_saying_warnings(data, request, storage, name, say):
+def _stages_saying_warnings(data, request, storage, name, say, source):
     """`run_stages`, its UserWarnings (fewer maxima than asked, ...) said as one line
     each rather than printed by Python with their source line."""
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", UserWarning)
-        out = run_stages(data, request, storage)
+        out = run_stages(data, request, storage, source=source)
     for warning in caught:
         if issubclass(warning.category, UserWarning):
             say(f"{name}: warning: {warning.message}")

@@ -312,8 +312,8 @@ class InMemory(Storage):
     """Keep every stage as computed (`Storage`'s hooks as they are)."""
 
 
-def run_stages(data, request: SegmentRequest, storage: Storage | None = None
-               ) -> tuple[Segmentation, tuple]:
+def run_stages(data, request: SegmentRequest, storage: Storage | None = None, *,
+               source: str = "the volume") -> tuple[Segmentation, tuple]:
     """The stages of a volume: mask, smoothing, value scale, curvature, Morse, cut.
 
     Parameters
@@ -323,25 +323,28 @@ def run_stages(data, request: SegmentRequest, storage: Storage | None = None
     request : SegmentRequest
     storage : Storage, optional
         Default `InMemory`.
+    source : str
+        What messages call the data (the file's path).
 
     Returns
     -------
     (Segmentation, (min, max) of the input's values)
     """
     storage = storage or InMemory()
+    value_range = _value_range(data, None)            # one pass, before anything is kept
+    if not all(np.isfinite(v) for v in value_range):
+        raise ValueError(f"{source} holds NaN or infinite values (its range is "
+                         f"{value_range[0]} .. {value_range[1]}); replace them first")
     choice = foreground_mask(data, request.mask)     # of the values as read
     request = request.with_smoothing(data, choice.mask)
     storage.begin(choice, request)
     hooks = storage.block_hooks       # set by `begin` (the blockwise work folder's)
     timings = {}
     with _timed(timings, "curvature"):
-        value_range = _value_range(data, hooks)
         values = storage.smoothed(gaussian(data, request.smooth_sigma))
         scale = request.value_scale
         if scale is None:
-            scale = _validate.value_scale(default_value_scale(
-                values, request.spacing,
-                value_range=None if request.smooth_sigma else value_range))
+            scale = _default_scale(values, request, value_range, source)
         curvature = storage.curvature(checked_grid_curvature(
             values, request.operator, request.spacing, scale, request.padding,
             block_hooks=hooks))
@@ -395,6 +398,19 @@ def _timed(timings: dict, stage: str):
     start = time.perf_counter()
     yield
     timings[stage] = timings.get(stage, 0.0) + time.perf_counter() - start
+
+
+def _default_scale(values, request, value_range, source) -> float:
+    """`default_value_scale` of the (smoothed) values, or a message naming the values'
+    range when none is finite (denormal or astronomically large values)."""
+    try:
+        return _validate.value_scale(default_value_scale(
+            values, request.spacing,
+            value_range=None if request.smooth_sigma else value_range))
+    except ValueError:
+        raise ValueError(f"{source}: its values span {value_range[0]:g} .. {value_range[1]:g}, "
+                         "too narrow or too wide a range for a default value scale; give "
+                         "one (value_scale, --value-scale)") from None
 
 
 def _value_range(data, hooks) -> tuple:
