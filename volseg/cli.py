@@ -446,8 +446,9 @@ def main(argv=None) -> int:
 
 @contextmanager
 def _quiet_readers():
-    """nibabel's warnings and log lines (its header fix-ups) off the terminal: what
-    volseg refuses it says in its own one line, and what it accepts needs no second."""
+    """nibabel's and Zarr's warnings and log lines (header fix-ups, metadata they do
+    not recognise) off the terminal: what volseg refuses it says in its own one line,
+    and what it accepts needs no second."""
     import logging
     import warnings
 
@@ -456,7 +457,8 @@ def _quiet_readers():
     logger.setLevel(logging.CRITICAL)
     try:
         with warnings.catch_warnings():
-            warnings.filterwarnings("ignore", module=r"nibabel(\..*)?")
+            for module in ("nibabel", "zarr", "numcodecs"):
+                warnings.filterwarnings("ignore", module=module + r"(\..*)?")
             yield
     finally:
         logger.setLevel(level)

@@ -100,21 +100,8 @@ def _array_of(node, path):
     return array, order, frame
 
 
-def read_zarr(path, *, allow_external_data: bool = False) -> Volume:
-    """Open a Zarr array or OME-Zarr image as a lazily read `Volume` (see the module).
-
-    `allow_external_data`: let the store hold links to files outside it (refused by
-    default: a store from elsewhere cannot make volseg read, and publish a checksum
-    of, any file)."""
-    import dask.array as da
-    import zarr
-
-    path = Path(path)
-    try:
-        node = zarr.open(str(path), mode="r")
-    except Exception as err:  # noqa: BLE001 - any failure to open is the store's
-        raise VolumeFileError(f"{path}: not a readable Zarr store ({type(err).__name__}: "
-                              f"{err})") from None
+def _checked_array(node, path, allow_external_data):
+    """`_array_of`, then every check that needs no chunk's values (see the module)."""
     array, order, frame = _array_of(node, path)
     if array.ndim != 3 and order is None:
         raise VolumeFileError(f"{path}: the Zarr array is {array.ndim}-D (shape {array.shape}); "
@@ -132,6 +119,32 @@ def read_zarr(path, *, allow_external_data: bool = False) -> Volume:
             "store with every chunk written)")
     if getattr(array, "shards", None) is not None:
         _check_shards(array, path)
+    return array, order, frame
+
+
+def read_zarr(path, *, allow_external_data: bool = False) -> Volume:
+    """Open a Zarr array or OME-Zarr image as a lazily read `Volume` (see the module).
+
+    `allow_external_data`: let the store hold links to files outside it (refused by
+    default: a store from elsewhere cannot make volseg read, and publish a checksum
+    of, any file)."""
+    import dask.array as da
+    import zarr
+
+    path = Path(path)
+    try:
+        node = zarr.open(str(path), mode="r")
+    except Exception as err:  # noqa: BLE001 - any failure to open is the store's
+        raise VolumeFileError(f"{path}: not a readable Zarr store ({type(err).__name__}: "
+                              f"{err})") from None
+    try:
+        array, order, frame = _checked_array(node, path, allow_external_data)
+    except VolumeFileError:
+        raise
+    except Exception as err:  # noqa: BLE001 - hostile metadata breaks Zarr in any way
+        raise VolumeFileError(f"{path}: unreadable Zarr metadata ({type(err).__name__}: "
+                              f"{' '.join(str(err).split())})") from None
+    dtype = np.dtype(array.dtype)
     lazy = da.from_array(_Checked(array, path), chunks=array.chunks, asarray=True,
                          fancy=False, name=f"zarr-{path.name}-{id(array)}")
     if order is not None:
