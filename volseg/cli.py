@@ -123,7 +123,10 @@ def _add_segment_io(seg):
     seg.add_argument("--wait", action="store_true",
                      help="wait for another volseg writing the same outputs (default: fail)")
     seg.add_argument("--allow-external-data", action="store_true",
-                     help="let a detached header (.nhdr, .dat) name a data file outside its folder")
+                     help="let a detached header (.nhdr, .dat) name a data file outside its "
+                     "folder, or a Zarr store hold links to files outside it")
+    seg.add_argument("--channel", type=int, metavar="C",
+                     help="the channel of an OME-Zarr image with several (its 'c' axis)")
     seg.add_argument("--json", action="store_true", help="print the summaries as JSON on stdout")
     seg.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
 
@@ -185,6 +188,7 @@ def _add_others(sub):
     info.add_argument("--shape", type=int, nargs=3, metavar=("X", "Y", "Z"))
     info.add_argument("--dtype")
     info.add_argument("--allow-external-data", action="store_true")
+    info.add_argument("--channel", type=int, metavar="C")
 
     compare = sub.add_parser("compare", help="compare two label volumes (Huang-Dom)")
     compare.add_argument("labels_a", metavar="LABELS_A")
@@ -261,7 +265,8 @@ def _cmd_segment(args):
     _check_mask_rule(mask)
     volumes = [load_for_budget(name, engine.memory_limit, shape=args.shape, dtype=args.dtype,
                                allow_external_data=args.allow_external_data,
-                               chunks=args.chunks, say=say) for name in args.inputs]
+                               chunks=args.chunks, channel=args.channel, say=say)
+               for name in args.inputs]
     if args.chunks is not None:
         volumes = [chunked(v, args.chunks) for v in volumes]
     summaries = segment_files(
@@ -362,7 +367,8 @@ def _demo_time(args, out_dir):
 def _cmd_info(args):
     from .files import load_volume
 
-    volume = load_volume(args.input, args.shape, args.dtype, args.allow_external_data)
+    volume = load_volume(args.input, args.shape, args.dtype, args.allow_external_data,
+                         channel=args.channel)
     data = volume.data
     frame = volume.frame
     if hasattr(data, "compute"):          # a Zarr store: one pass over its chunks

@@ -45,18 +45,19 @@ def _quiet(message):
     """The default `say`: no progress."""
 
 
-def load_volume(name, shape=None, dtype=None, allow_external_data=False, chunks=None):
+def load_volume(name, shape=None, dtype=None, allow_external_data=False, chunks=None,
+                channel=None):
     """The `Volume` of a volume file or a named dataset (`volseg.datasets.resolve`); lazy
-    (a Dask array of `chunks`) when `chunks` is given."""
+    (a Dask array of `chunks`) when `chunks` is given; `channel` of an OME-Zarr image."""
     from .datasets import resolve
     from .io import read_volume
 
     return read_volume(resolve(name), shape=shape, dtype=dtype,
-                       allow_external_data=allow_external_data, chunks=chunks)
+                       allow_external_data=allow_external_data, chunks=chunks, channel=channel)
 
 
 def load_for_budget(name, budget: int, *, shape=None, dtype=None, allow_external_data=False,
-                    chunks=None, say=_quiet):
+                    chunks=None, channel=None, say=_quiet):
     """`load_volume`, lazily (the blockwise path, `DEFAULT_CHUNKS`) when `chunks` is not
     given but the in-memory path would need more than `budget` bytes
     (`IN_MEMORY_BYTES_PER_VOXEL` per voxel). The file size bounds the voxel count from
@@ -65,7 +66,8 @@ def load_for_budget(name, budget: int, *, shape=None, dtype=None, allow_external
     from .blockwise import DEFAULT_CHUNKS, IN_MEMORY_BYTES_PER_VOXEL
     from .datasets import resolve
 
-    options = {"shape": shape, "dtype": dtype, "allow_external_data": allow_external_data}
+    options = {"shape": shape, "dtype": dtype, "allow_external_data": allow_external_data,
+               "channel": channel}
     if chunks is not None:
         return load_volume(name, **options, chunks=chunks)
     path = resolve(name)       # a dataset name is verified once, here

@@ -285,3 +285,23 @@ def test_info_on_a_zarr_store(tmp_path, capsys):
     assert main(["info", str(tmp_path / "v.zarr")]) == 0
     out = capsys.readouterr().out
     assert "range: 0 .. 59 (mean 29.5)" in out and "shape (x, y, z): (5, 4, 3)" in out
+
+
+def test_ome_images_with_channel_and_time_axes(tmp_path, capsys):
+    group = zarr.open_group(str(tmp_path / "o.zarr"), mode="w")
+    data = np.arange(1 * 3 * 6 * 5 * 4).reshape(1, 3, 6, 5, 4).astype(np.uint16)   # t c z y x
+    group.create_array("0", shape=data.shape, chunks=(1, 1, 4, 3, 2), dtype=data.dtype)[:] = data
+    group.attrs["multiscales"] = [{"version": "0.4", "axes": [{"name": n} for n in "tczyx"],
+                                   "datasets": [{"path": "0", "coordinateTransformations": [
+                                       {"type": "scale", "scale": [1, 1, 3.0, 2.0, 1.0]}]}]}]
+    with pytest.raises(VolumeFileError, match="has 3 channels; choose one with --channel"):
+        read_volume(tmp_path / "o.zarr")
+    volume = read_volume(tmp_path / "o.zarr", channel=2)      # the singleton t is dropped
+    np.testing.assert_array_equal(volume.data.compute(), data[0, 2].transpose(2, 1, 0))
+    assert volume.spacing == (1.0, 2.0, 3.0)
+    with pytest.raises(VolumeFileError, match="not one of its 3 channels"):
+        read_volume(tmp_path / "o.zarr", channel=3)
+    assert main(["segment", str(tmp_path / "o.zarr"), "--channel", "1", "-o",
+                 str(tmp_path / "out"), "-q", "--regions", "2"]) == 0
+    assert main(["info", str(tmp_path / "o.zarr")]) == 2
+    assert "--channel (0 to 2)" in capsys.readouterr().err

@@ -98,27 +98,26 @@ def parse_bytes(text) -> int:
     return int(value * physical_memory()) if value < 1 else int(value)
 
 
-def _within(seconds: float, make):
-    """`make()` in a thread, or TimeoutError after `seconds` (a server that accepts the
-    connection and never answers holds distributed's Client past its own timeout)."""
-    import threading
+def _answers(address: str, seconds: float) -> None:
+    """Raise unless a Dask scheduler at `address` answers an identity request within
+    `seconds` (a server that accepts the connection and never answers would hold
+    distributed's Client, half made and already Dask's default, forever)."""
+    import asyncio
 
-    outcome = {}
+    from distributed.comm import connect
 
-    def run():
+    async def identity():
+        comm = await connect(address, timeout=seconds)
         try:
-            outcome["value"] = make()
-        except BaseException as err:  # noqa: BLE001 - handed to the caller
-            outcome["error"] = err
+            await comm.write({"op": "identity", "reply": True})
+            return await comm.read()
+        finally:
+            comm.abort()
 
-    thread = threading.Thread(target=run, daemon=True, name="volseg-connect")
-    thread.start()
-    thread.join(seconds)
-    if thread.is_alive():
-        raise TimeoutError(f"no answer within {seconds:g} s")
-    if "error" in outcome:
-        raise outcome["error"]
-    return outcome["value"]
+    try:
+        asyncio.run(asyncio.wait_for(identity(), seconds))
+    except asyncio.TimeoutError:
+        raise TimeoutError(f"no answer within {seconds:g} s") from None
 
 
 class Engine:
@@ -197,8 +196,8 @@ class Engine:
         if self.scheduler != "local":
             previous = dask.config.get("scheduler", None)
             try:
-                return _within(self.timeout + 5.0, lambda: Client(
-                    self.scheduler, timeout=f"{self.timeout}s"))
+                _answers(self.scheduler, self.timeout)
+                return Client(self.scheduler, timeout=f"{self.timeout}s")
             except Exception as err:  # noqa: BLE001 - any failure to connect (an echo
                 # server, a tls:// address without certificates, ...) is the address's
                 # The Client made itself Dask's default before it tried to connect, and

@@ -395,7 +395,7 @@ def _reader(path: Path):
 
 
 def read_volume(path, *, shape=None, dtype=None, byte_order=None,
-                allow_external_data: bool = False, chunks=None) -> Volume:
+                allow_external_data: bool = False, chunks=None, channel=None) -> Volume:
     """Read a volume from a file, by extension.
 
     Parameters
@@ -424,6 +424,9 @@ def read_volume(path, *, shape=None, dtype=None, byte_order=None,
         checked block by block when computed; compressed data (.nii.gz, gzip NRRD),
         NIfTI and big-endian data are read whole first. Zarr stores keep their own
         chunks (rechunk the data to change them).
+    channel : int, optional
+        The channel of an OME-Zarr image with a ``c`` axis of several (required
+        then; an image of one channel needs none).
 
     Returns
     -------
@@ -463,7 +466,9 @@ def read_volume(path, *, shape=None, dtype=None, byte_order=None,
 
     if is_zarr(path):
         # lazy: a Dask array over the store's chunks
-        return read_zarr(path, allow_external_data=allow_external_data)
+        return read_zarr(path, allow_external_data=allow_external_data, channel=channel)
+    if channel is not None:
+        raise ValueError(f"{path}: `channel` applies to OME-Zarr images only")
     regular_file_size(path)  # missing, a folder, a device or a pipe: refused before opening
     try:
         data, frame, short, source, files = _reader(path)(

@@ -66,24 +66,28 @@ def _ome_level0(group, path):
 MAX_CHUNKS = 2**24
 
 
-def _array_of(node, path):
-    """(the array, the order of its x, y, z axes or None, its frame or None) of an opened
-    Zarr node: an OME-Zarr image's level 0, or an array with volseg's attributes."""
+def _array_of(node, path, channel=None):
+    """(the array, the order of its x, y, z axes or None, its frame or None, the index
+    of each other axis) of an opened Zarr node: an OME-Zarr image's level 0 (its
+    `channel`, or its only one), or an array with volseg's attributes."""
     import zarr
 
     frame = None
     if isinstance(node, zarr.Group):
         array, axes, factors = _ome_level0(node, path)
         keep = [i for i, name in enumerate(axes) if name in ("x", "y", "z")]
-        extra = [i for i, name in enumerate(axes) if name not in ("x", "y", "z")]
-        if len(keep) != 3 or any(array.shape[i] != 1 for i in extra):
+        pick = _other_axes(path, axes, array.shape, channel)
+        if len(keep) != 3 or sorted(set(axes)) != sorted(axes):
             raise VolumeFileError(f"{path}: OME-Zarr image of axes {axes} and shape {array.shape}: "
-                                  "volseg needs three spatial axes x, y, z (other axes of size 1)")
+                                  "volseg needs three spatial axes x, y, z")
         order = [keep[[axes[i] for i in keep].index(name)] for name in ("x", "y", "z")]
         spacing = tuple(factors[i] for i in order)
         frame = Frame.from_spacing(spacing)
     else:
-        array = node
+        array, pick = node, {}
+        if channel is not None:
+            raise VolumeFileError(f"{path}: a plain Zarr array has no channels (--channel "
+                                  "applies to OME-Zarr images)")
         attrs = dict(array.attrs).get("volseg", {})
         if not isinstance(attrs, dict):
             raise VolumeFileError(f"{path}: the 'volseg' attribute must be an object (axes, "
@@ -97,12 +101,38 @@ def _array_of(node, path):
                 frame = Frame(np.asarray(attrs["affine"], dtype=np.float64))
             except (ValueError, TypeError) as err:
                 raise VolumeFileError(f"{path}: the 'affine' attribute: {err}") from None
-    return array, order, frame
+    return array, order, frame, pick
 
 
-def _checked_array(node, path, allow_external_data):
+def _other_axes(path, axes, shape, channel) -> dict:
+    """Axis position -> the index read along it, for the non-spatial axes: `channel`
+    along ``c`` (needed when there are several), 0 along an axis of size 1."""
+    pick = {}
+    for i, name in enumerate(axes):
+        if name in ("x", "y", "z"):
+            continue
+        if name == "c" and (shape[i] > 1 or channel is not None):
+            if channel is None:
+                raise VolumeFileError(f"{path}: the image has {shape[i]} channels; choose one "
+                                      f"with --channel (0 to {shape[i] - 1})")
+            if isinstance(channel, bool) or not 0 <= int(channel) < shape[i]:
+                raise VolumeFileError(f"{path}: --channel {channel} is not one of its "
+                                      f"{shape[i]} channels (0 to {shape[i] - 1})")
+            pick[i] = int(channel)
+        elif shape[i] != 1:
+            raise VolumeFileError(f"{path}: OME-Zarr axis {name!r} has {shape[i]} entries; "
+                                  "volseg reads one 3-D volume (a time series: one step per "
+                                  "store, or volseg isosurface)")
+        else:
+            pick[i] = 0
+    if channel is not None and "c" not in axes:
+        raise VolumeFileError(f"{path}: the image has no channel axis ('c'); drop --channel")
+    return pick
+
+
+def _checked_array(node, path, allow_external_data, channel):
     """`_array_of`, then every check that needs no chunk's values (see the module)."""
-    array, order, frame = _array_of(node, path)
+    array, order, frame, pick = _array_of(node, path, channel)
     if array.ndim != 3 and order is None:
         raise VolumeFileError(f"{path}: the Zarr array is {array.ndim}-D (shape {array.shape}); "
                               "volseg needs a 3-D volume")
@@ -119,15 +149,15 @@ def _checked_array(node, path, allow_external_data):
             "store with every chunk written)")
     if getattr(array, "shards", None) is not None:
         _check_shards(array, path)
-    return array, order, frame
+    return array, order, frame, pick
 
 
-def read_zarr(path, *, allow_external_data: bool = False) -> Volume:
+def read_zarr(path, *, allow_external_data: bool = False, channel=None) -> Volume:
     """Open a Zarr array or OME-Zarr image as a lazily read `Volume` (see the module).
 
     `allow_external_data`: let the store hold links to files outside it (refused by
     default: a store from elsewhere cannot make volseg read, and publish a checksum
-    of, any file)."""
+    of, any file). `channel`: of an OME-Zarr image with several."""
     import dask.array as da
     import zarr
 
@@ -138,7 +168,7 @@ def read_zarr(path, *, allow_external_data: bool = False) -> Volume:
         raise VolumeFileError(f"{path}: not a readable Zarr store ({type(err).__name__}: "
                               f"{err})") from None
     try:
-        array, order, frame = _checked_array(node, path, allow_external_data)
+        array, order, frame, pick = _checked_array(node, path, allow_external_data, channel)
     except VolumeFileError:
         raise
     except Exception as err:  # noqa: BLE001 - hostile metadata breaks Zarr in any way
@@ -148,7 +178,7 @@ def read_zarr(path, *, allow_external_data: bool = False) -> Volume:
     lazy = da.from_array(_Checked(array, path), chunks=array.chunks, asarray=True,
                          fancy=False, name=f"zarr-{path.name}-{id(array)}")
     if order is not None:
-        lazy = lazy.squeeze(axis=tuple(i for i in range(array.ndim) if i not in order))
+        lazy = lazy[tuple(pick.get(i, slice(None)) for i in range(array.ndim))]
         remaining = sorted(order)
         lazy = lazy.transpose([remaining.index(i) for i in order])
     if min(lazy.shape) < 2:
