@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from volseg.cli import main
-from volseg.io import OutputSet
+from volseg.io import OutputSet, VolumeFileError
 
 ROTATED = np.array([[0.0, -2.0, 0.0, 10.0], [1.5, 0.0, 0.0, -3.0], [0.0, 0.0, -4.0, 7.0],
                     [0.0, 0.0, 0.0, 1.0]])
@@ -436,3 +436,44 @@ def test_denormal_values_ask_for_a_value_scale(tmp_path, capsys):
     assert "give one (value_scale, --value-scale)" in line and "d.npy" in line
     assert main(["segment", str(tmp_path / "d.npy"), "-o", str(tmp_path / "out"), "-q",
                  "--value-scale", "1e308"]) == 0
+
+
+def test_api_edges_name_their_argument(tmp_path):
+    from volseg.io import read_volume, write_volume
+    from volseg.morse import descending_complex
+
+    with pytest.raises(ValueError, match="`field` is a single number"):
+        descending_complex(np.array(3.0))
+    hierarchy = descending_complex(np.random.default_rng(0).random(50))
+    for bad in ((40, 20), (-5, 3), ("a", 3)):
+        with pytest.raises(ValueError, match="`region_range`"):
+            hierarchy.largest_gap(bad)
+    mask = np.zeros((4, 5, 6), bool)
+    mask[1:3, 2:4, 3:5] = True
+    write_volume(tmp_path / "m.nii.gz", mask)
+    back = np.asarray(read_volume(tmp_path / "m.nii.gz").data)
+    assert back.dtype == np.uint8 and np.array_equal(back, mask)
+
+
+def test_budget_and_shape_limits_say_why(tmp_path, capsys):
+    import gzip
+
+    from volseg.io import read_volume
+
+    (tmp_path / "g.nii.gz").write_bytes(gzip.compress(bytes(_nifti_bytes(_blob()))))
+    assert main(["segment", str(tmp_path / "g.nii.gz"), "-o", str(tmp_path / "o"), "-q",
+                 "--memory-limit", "20KB"]) == 2
+    assert "is read whole and needs about" in _one_clean_line(capsys.readouterr().err)
+    (tmp_path / "flat.nrrd").write_bytes(b"NRRD0004\ntype: uchar\ndimension: 2\nsizes: 4 5\n"
+                                         b"encoding: raw\n\n" + bytes(20))
+    assert main(["info", str(tmp_path / "flat.nrrd")]) == 2
+    assert "a 2-D NRRD (sizes 4 5); volseg segments 3-D" in _one_clean_line(
+        capsys.readouterr().err)
+    source = _raw(tmp_path / "c_12x10x8_uint8.raw", _blob())
+    assert main(["segment", str(source), "-o", str(tmp_path / "o"), "-q", "--scheduler",
+                 "local", "--workers", "1", "--memory-limit", "1MB", "--chunks", "8"]) == 2
+    assert "a worker needs to make progress" in _one_clean_line(capsys.readouterr().err)
+    lazy = read_volume(source, chunks=4)
+    source.write_bytes(source.read_bytes()[:100])          # truncated while it is read
+    with pytest.raises(VolumeFileError, match="truncated or replaced while volseg read it"):
+        lazy.data.compute()

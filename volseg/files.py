@@ -71,6 +71,7 @@ def load_for_budget(name, budget: int, *, shape=None, dtype=None, allow_external
     if chunks is not None:
         return load_volume(name, **options, chunks=chunks)
     path = resolve(name)       # a dataset name is verified once, here
+    _refuse_compressed_over_budget(path, budget)
     try:
         size = path.stat().st_size if path.is_file() else 0
     except OSError:
@@ -84,6 +85,25 @@ def load_for_budget(name, budget: int, *, shape=None, dtype=None, allow_external
                 "chunks (--chunks N to choose, --memory-limit to change the limit)")
             return volume
     return load_volume(str(path), **options)
+
+
+def _refuse_compressed_over_budget(path, budget: int) -> None:
+    """A compressed volume is decompressed whole: refuse one whose in-memory run would
+    exceed `budget` (it cannot go block by block)."""
+    from .blockwise import IN_MEMORY_BYTES_PER_VOXEL
+    from .io import VolumeFileError
+    from .io.readers import compressed_shape
+
+    shape = compressed_shape(path)
+    if shape is None:
+        return
+    need = int(np.prod(shape, dtype=np.float64)) * IN_MEMORY_BYTES_PER_VOXEL
+    if need > budget:
+        raise VolumeFileError(
+            f"{path}: a compressed volume of shape {shape} is read whole and needs about "
+            f"{need / 2**30:.3g} GiB, above the memory limit of {budget / 2**30:.3g} GiB; "
+            "decompress it (gunzip, or NRRD 'encoding: raw') or convert it to Zarr to segment "
+            "it block by block, or raise --memory-limit")
 
 
 def chunked(volume, size: int):

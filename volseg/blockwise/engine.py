@@ -45,6 +45,9 @@ __all__ = ["Engine", "EngineError", "default_memory_limit", "parse_bytes"]
 
 MEMORY_SHARE = 0.5          # of physical RAM, the default budget of a local cluster
 CONNECT_TIMEOUT = 10.0      # seconds to reach a running scheduler
+#: A local cluster's worker below this memory pauses for good (its interpreter, numba
+#: and a block use about that much): refused up front instead.
+MIN_WORKER_MEMORY = 256 * 2**20
 
 
 def _return_freed_memory():
@@ -209,6 +212,11 @@ class Engine:
         # One thread per worker, and one for numba's parallel loops inside it: the
         # workers are the parallelism (nested, they oversubscribe the cores and the
         # kernels' OpenMP threads spin against each other: 2.3x slower on 2 cores).
+        if self.memory_limit // self.workers < MIN_WORKER_MEMORY:
+            raise EngineError(
+                f"--memory-limit {self.memory_limit / 2**20:.0f} MiB over {self.workers} workers "
+                f"leaves each less than the {MIN_WORKER_MEMORY // 2**20} MiB a worker needs to "
+                "make progress (its process alone); give more, or fewer --workers")
         cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
                                memory_limit=self.memory_limit // self.workers,
                                dashboard_address=None, env={"NUMBA_NUM_THREADS": "1"})

@@ -202,8 +202,12 @@ class MappedArray:
         self.ndim = view.ndim
 
     def __getitem__(self, key):
-        mapping = np.memmap(self.filename, dtype=np.uint8, mode="r", offset=self.file_offset,
-                            shape=(self.extent,))
+        try:
+            mapping = np.memmap(self.filename, dtype=np.uint8, mode="r",
+                                offset=self.file_offset, shape=(self.extent,))
+        except (ValueError, OSError) as err:    # truncated (or removed) since it was opened
+            raise VolumeFileError(f"{self.filename}: can no longer be read as it was opened "
+                                  f"(truncated or replaced while volseg read it: {err})") from None
         view = np.ndarray(self.shape, self.dtype, buffer=mapping, offset=self.start,
                           strides=self.strides)
         return np.array(view[key])

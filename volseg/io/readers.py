@@ -204,6 +204,9 @@ def _read_nrrd(path: Path, shape, dtype, byte_order, allow_external, mapped=Fals
     if dimension != len(sizes):
         raise VolumeFileError(f"{path}: the 'dimension' field says {dimension} but 'sizes' "
                               f"lists {len(sizes)} sizes ({' '.join(map(str, sizes))})")
+    if len(sizes) != 3 and shape is None:
+        raise VolumeFileError(f"{path}: a {len(sizes)}-D NRRD (sizes {' '.join(map(str, sizes))}"
+                              "); volseg segments 3-D volumes")
     type_name = fields.get("type", "").lower()
     if type_name not in NRRD_TYPES:
         raise VolumeFileError(f"{path}: the 'type' field {fields.get('type')!r} is not a "
@@ -392,6 +395,27 @@ def _reader(path: Path):
     if name.endswith(".dat"):
         return _read_dat
     return _read_raw
+
+
+def compressed_shape(path):
+    """The declared shape of a compressed volume file (``.nii.gz``, gzip-encoded NRRD),
+    from its header alone; None for other files (or a header that does not parse:
+    `read_volume` says why). A compressed volume is read whole, never block by block."""
+    path = Path(path)
+    name = path.name.lower()
+    try:
+        if name.endswith(".nii.gz"):
+            import nibabel
+
+            return tuple(int(s) for s in nibabel.load(path).header.get_data_shape())
+        if name.endswith((".nrrd", ".nhdr")):
+            head, _ = read_head(path, b"\n\n")
+            fields = _key_values(path, head.decode("latin-1").replace("\r", "").split("\n", 1)[-1])
+            if fields.get("encoding", "raw").lower() in ("gzip", "gz"):
+                return tuple(_numbers(path, "sizes", fields.get("sizes"), None, int))
+    except Exception:  # noqa: BLE001 - read_volume reports the header's problem
+        return None
+    return None
 
 
 def read_volume(path, *, shape=None, dtype=None, byte_order=None,

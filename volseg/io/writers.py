@@ -67,6 +67,7 @@ def write_volume(path, data, *, spacing=(1.0, 1.0, 1.0), frame: Frame | None = N
         ``.nrrd`` (with space directions and origin, RAS+), ``.npy``, ``.raw``
         (x fastest, native little-endian, no header).
     data : (X, Y, Z) array_like
+        A boolean array (a mask) is written as uint8 0 / 1.
     spacing : (3,) sequence of float
         Voxel sizes, for an axis-aligned frame when `frame` is not given.
     frame : Frame, optional
@@ -75,6 +76,8 @@ def write_volume(path, data, *, spacing=(1.0, 1.0, 1.0), frame: Frame | None = N
     """
     path = Path(path)
     data = np.asarray(data)
+    if data.dtype == bool:        # a mask: as 0 / 1 bytes (NIfTI and NRRD have no bool type)
+        data = data.astype(np.uint8)
     frame = frame or Frame.from_spacing(spacing)
     name = path.name.lower()
     if not name.endswith((".nii", ".nii.gz", ".npy", ".nrrd", ".raw")):

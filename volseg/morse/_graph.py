@@ -123,6 +123,8 @@ def _validate_field(field, mask, adjacency) -> tuple:
         raise ValueError(f"`field` must hold real numbers, got dtype {field.dtype}")
     if field.size == 0:
         raise ValueError("`field` is empty")
+    if field.ndim == 0:
+        raise ValueError("`field` is a single number; give an array (one value per vertex)")
     values = np.ascontiguousarray(field, dtype=np.float64)  # flat indices are C order
     if mask is not None:
         mask = np.asarray(mask)

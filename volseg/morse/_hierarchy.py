@@ -213,7 +213,13 @@ class MorseHierarchy:
         gap between consecutive extinctions of `measure`, on a log scale: the most
         clearly separated simplification (among the components `min_component`
         keeps). Falls back to the range's ends when the hierarchy has fewer maxima."""
-        lo, hi = (int(r) for r in region_range)
+        try:
+            lo, hi = (int(r) for r in region_range)
+        except (TypeError, ValueError):
+            raise ValueError(f"`region_range` must be two region counts (lo, hi), got "
+                             f"{region_range!r}") from None
+        if not 1 <= lo <= hi:
+            raise ValueError(f"`region_range` must be counts 1 <= lo <= hi, got {region_range!r}")
         extinction, components = self.curve(measure, min_component)
         p = np.sort(extinction)[::-1]
         best, best_gap = None, -np.inf
