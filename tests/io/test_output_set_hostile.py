@@ -168,3 +168,28 @@ def test_a_blockwise_run_killed_after_its_journal_over_an_old_set_heals(tmp_path
     assert [p.name for p in out.iterdir() if p.name.startswith(".")] == []
     labels = np.asarray(__import__("zarr").open(str(out / "silicium_labels.zarr"), mode="r"))
     assert labels.max() == 9
+
+
+def test_a_staging_refilled_by_a_late_worker_is_removed_on_release(tmp_path):
+    import threading
+    import time
+
+    late = []
+
+    def write(paths):
+        def worker():          # a block still being written when the run is interrupted
+            time.sleep(0.3)
+            paths["summary"].parent.mkdir(parents=True, exist_ok=True)
+            paths["summary"].write_text("late")
+        late.append(threading.Thread(target=worker))
+        late[0].start()
+        raise KeyboardInterrupt
+
+    out = OutputSet(tmp_path, "fuel", NAMES)
+    out.acquire()
+    with pytest.raises(KeyboardInterrupt):
+        out.commit(write)
+    late[0].join()                                   # the engine stops its threads ...
+    assert any(p.name.startswith(".volseg-staging-") for p in tmp_path.iterdir())
+    out.release()                                    # ... then the set lets go
+    assert list(tmp_path.iterdir()) == []
