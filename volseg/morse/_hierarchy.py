@@ -249,10 +249,13 @@ class MorseHierarchy:
         vertices that took part (of their weight, with `vertex_weight`)."""
         if not 0 <= min_share < 1:
             raise ValueError(f"`min_component` must be a share in [0, 1), got {min_share!r}")
-        component = self.component_of_maximum()
         if min_share == 0 or self.n_components == 1:
             return np.zeros(len(self.maxima), dtype=bool)
-        sizes = np.bincount(component, weights=self.cell_measure("size"))
+        component = self.component_of_maximum()
+        if "cell sizes" not in self._pruned:       # the sizes alone, without a pruning
+            self._pruned["cell sizes"] = (self._pruned["size"][2] if "size" in self._pruned
+                                          else _measures.cell_measures(self, "size"))
+        sizes = np.bincount(component, weights=self._pruned["cell sizes"])
         return (sizes < min_share * sizes.sum())[component]
 
     def _merged_events(self, min_persistence, n_regions, measure, threshold, dropped):
