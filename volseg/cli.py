@@ -332,7 +332,7 @@ def _cmd_demo(args):
         return _demo_time(args, out_dir)
     volume = Volume(demo_volume(), name="demo", source="built-in synthetic")
     summary, = segment_files([volume], out_dir, force=args.force, say=_progress(args.quiet),
-                             mask="auto")
+                             mask="auto", n_regions=DEMO_REGIONS)
     print(f"segmented a built-in {'x'.join(map(str, volume.shape))} volume into "
           f"{summary['n_regions']} regions; wrote:")
     for path in summary["outputs"].values():
@@ -342,6 +342,9 @@ def _cmd_demo(args):
 
 #: Regions of `volseg demo --time`: each blob's cap, the neck and the merged blob's ends.
 DEMO_TIME_REGIONS = 6
+#: The demo volume holds three blobs and a ridge: 8 regions show them and their parts
+#: (30 would be mostly slivers between them, a degenerate cut).
+DEMO_REGIONS = 8
 
 
 def _demo_time(args, out_dir):

@@ -259,6 +259,10 @@ def write_preview(path, volume, curvature, labels, *, title="", persistence=None
     canvas = Image.new("RGB", (width, height), _BACKGROUND)
     draw = ImageDraw.Draw(canvas)
     small, large = _font(11), _font(17)
+    for size in (17, 15, 13, 11):          # a long title (a degenerate cut's) still fits
+        large = _font(size)
+        if draw.textlength(title, font=large) <= width - 16:
+            break
     draw.text((width // 2, 14), title, fill=_INK, font=large, anchor="ma")
     bar_y = _draw_rows(canvas, draw, rows, heights, k) - 8
     ramp = np.linspace(0, 1, _BOX)
