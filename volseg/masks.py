@@ -86,7 +86,7 @@ class MaskChoice:
         return "" if self.mask is None else f" in a {self.used} mask of {self.voxels} voxels"
 
 
-def foreground_mask(volume, rule="auto") -> MaskChoice:
+def foreground_mask(volume, rule="auto", *, value_range=None) -> MaskChoice:
     """Resolve a mask rule (or array) for `volume`; see the module docstring.
 
     Parameters
@@ -96,6 +96,9 @@ def foreground_mask(volume, rule="auto") -> MaskChoice:
         the computed volume (one or two passes over the blocks: the minimum for
         ``"auto"``/``"nonzero"``, the histogram for ``"otsu"``, and the count).
     rule : str, bool ndarray (or Dask array) or None
+    value_range : (min, max), optional
+        Of `volume`, when the caller has it (`run_stages` does): spares a lazy
+        volume's rules another pass for it.
 
     Returns
     -------
@@ -130,7 +133,7 @@ def foreground_mask(volume, rule="auto") -> MaskChoice:
         return _checked(MaskChoice(mask, "array", "array", 0))
     name, threshold = check_rule(rule)
     if name == "auto":
-        return _auto(data, lazy)
+        return _auto(data, lazy, value_range)
     if name == "nonzero":
         lowest, at_lowest = _plateau(data, lazy)
         voxels = int(data.size - at_lowest) if lowest == lowest else 0    # NaN: none
@@ -138,7 +141,7 @@ def foreground_mask(volume, rule="auto") -> MaskChoice:
     if name == "otsu":
         from skimage.filters import threshold_otsu
 
-        threshold = float(threshold_otsu(hist=_histogram(data, lazy)))
+        threshold = float(threshold_otsu(hist=_histogram(data, lazy, value_range)))
         return _checked(MaskChoice(data > threshold, "otsu", f"value>{threshold:g}", 0))
     op, value = threshold
     compare = {">": np.greater, ">=": np.greater_equal, "<": np.less, "<=": np.less_equal}[op]
@@ -171,9 +174,9 @@ def _compute(x):
     return x.compute() if hasattr(x, "compute") else x
 
 
-def _auto(data, lazy: bool) -> MaskChoice:
+def _auto(data, lazy: bool, value_range=None) -> MaskChoice:
     """The ``"auto"`` rule of the module docstring: a plateau, a low mode, or none."""
-    lowest, highest = _range(data, lazy)
+    lowest, highest = value_range if value_range is not None else _range(data, lazy)
     level, at_level = _plateau(data, lazy)
     if at_level > AUTO_PLATEAU_SHARE * data.size:
         return _checked(MaskChoice(data > level, "auto", "nonzero", int(data.size - at_level)))
@@ -192,7 +195,7 @@ def _low_mode(data, lazy: bool, lowest: float, highest: float):
     module docstring's rule 2), or None."""
     from scipy.ndimage import gaussian_filter1d
 
-    counts, centers = _histogram(data, lazy)
+    counts, centers = _histogram(data, lazy, (lowest, highest))
     smooth = gaussian_filter1d(counts.astype(np.float64), max(1.0, len(counts) / 128))
     peak = int(np.argmax(smooth))
     if centers[peak] - lowest > AUTO_LOW_MODE_RANGE * (highest - lowest):
@@ -226,11 +229,12 @@ def _border_share_above(data, threshold, lazy: bool) -> float:
 
 
 def _range(data, lazy: bool) -> tuple:
+    """(min, max) as Python numbers (exact, integers stay integers)."""
     if lazy:
         import dask
 
-        return tuple(float(v) for v in dask.compute(data.min(), data.max()))
-    return float(data.min()), float(data.max())
+        return tuple(v.item() for v in dask.compute(data.min(), data.max()))
+    return data.min().item(), data.max().item()
 
 
 def _plateau(data, lazy: bool, level=None):
@@ -254,18 +258,18 @@ def _plateau(data, lazy: bool, level=None):
     return lowest, int(counts[lows == lowest].sum())
 
 
-def _histogram(data, lazy: bool) -> tuple:
+def _histogram(data, lazy: bool, value_range=None) -> tuple:
     """(counts, bin centres) of the volume as scikit-image's `exposure.histogram`
     makes it (integers: one bin per value from the minimum to the maximum; floats:
-    256 bins over [min, max]), summed over the blocks for a Dask volume."""
+    256 bins over [min, max]), summed over the blocks for a Dask volume (its
+    `value_range` read first unless given)."""
     if not lazy:
         from skimage.exposure import histogram
 
         return histogram(data.ravel(), 256, source_range="image")
-    import dask
     import dask.array as da
 
-    lo, hi = (v.item() for v in dask.compute(data.min(), data.max()))
+    lo, hi = value_range if value_range is not None else _range(data, lazy)
     if data.dtype.kind in "biu":
         width = int(hi) - int(lo) + 1
         counts = data.map_blocks(

@@ -335,7 +335,7 @@ def run_stages(data, request: SegmentRequest, storage: Storage | None = None, *,
     if not all(np.isfinite(v) for v in value_range):
         raise ValueError(f"{source} holds NaN or infinite values (its range is "
                          f"{value_range[0]} .. {value_range[1]}); replace them first")
-    choice = foreground_mask(data, request.mask)     # of the values as read
+    choice = foreground_mask(data, request.mask, value_range=value_range)   # values as read
     request = request.with_smoothing(data, choice.mask)
     storage.begin(choice, request)
     hooks = storage.block_hooks       # set by `begin` (the blockwise work folder's)
