@@ -30,6 +30,7 @@ from .io import Frame, OutputSet
 from .outputs import (
     degenerate_cut_warning,
     files_sha256,
+    input_files,
     output_names,
     result_title,
     summary,
@@ -291,11 +292,9 @@ def _stages_saying_warnings(data, request, storage, name, say, source):
 def _file_states(paths) -> dict:
     """(size, mtime in ns, inode) of every file of an input, a store's files included."""
     states = {}
-    for path in map(Path, paths):
-        files = sorted(p for p in path.rglob("*") if p.is_file()) if path.is_dir() else [path]
-        for file in files:
-            info = os.stat(file)
-            states[str(file)] = (info.st_size, info.st_mtime_ns, info.st_ino)
+    for file in input_files(paths):
+        info = os.stat(file)
+        states[str(file)] = (info.st_size, info.st_mtime_ns, info.st_ino)
     return states
 
 

@@ -15,6 +15,7 @@ from ._summary import (
     OUTPUT_SUFFIXES,
     degenerate_cut_warning,
     files_sha256,
+    input_files,
     input_summary,
     output_names,
     result_summary,
@@ -24,6 +25,7 @@ from ._summary import (
 from ._write import write_result_files, write_segmentation
 
 __all__ = ["OUTPUT_SUFFIXES", "BLOCKWISE_SUFFIXES", "BLOCKWISE_NIFTI_VOXELS",
-           "LISTED_PERSISTENCES", "output_names", "files_sha256", "summary", "result_summary",
-           "input_summary", "result_title", "degenerate_cut_warning", "write_result_files",
+           "LISTED_PERSISTENCES", "output_names", "files_sha256", "input_files", "summary",
+           "result_summary", "input_summary", "result_title", "degenerate_cut_warning",
+           "write_result_files",
            "write_segmentation"]

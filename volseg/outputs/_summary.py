@@ -51,6 +51,15 @@ def output_names(stem: str, persistence_plot: bool = False, blockwise: bool = Fa
 LISTED_PERSISTENCES = 200
 
 
+def input_files(paths) -> list[Path]:
+    """Every file of an input's `paths`: a Zarr store is a folder, its files in name
+    order."""
+    files = []
+    for path in map(Path, paths):
+        files += sorted(p for p in path.rglob("*") if p.is_file()) if path.is_dir() else [path]
+    return files
+
+
 def files_sha256(paths) -> str | None:
     """SHA-256 of the bytes of `paths` read one after another (a detached header and its
     data file: every byte the reader used). None for no files."""
@@ -58,11 +67,7 @@ def files_sha256(paths) -> str | None:
     if not paths:
         return None
     digest = hashlib.sha256()
-    expanded = []
-    for path in paths:   # a Zarr store is a folder: its files, in name order
-        path = Path(path)
-        expanded += sorted(p for p in path.rglob("*") if p.is_file()) if path.is_dir() else [path]
-    for path in expanded:
+    for path in input_files(paths):
         with open(path, "rb") as handle:
             for block in iter(lambda h=handle: h.read(1 << 20), b""):
                 digest.update(block)
