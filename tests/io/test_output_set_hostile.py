@@ -35,6 +35,16 @@ def _staging(folder, stem="fuel", suffix="abcd1234", journal=None):
     return staging
 
 
+def _fuel_file(folder):
+    """A small raw volume named fuel (stem ``fuel``), made here: no dataset needed."""
+    axis = np.linspace(-1, 1, 12)
+    x, y, z = np.meshgrid(axis, axis, axis, indexing="ij")
+    data = np.round(200 * np.exp(-3 * (x**2 + y**2 + z**2))).astype(np.uint8)
+    path = folder / "fuel_12x12x12_uint8.raw"
+    path.write_bytes(np.ascontiguousarray(data.transpose(2, 1, 0)).tobytes())
+    return str(path)
+
+
 def _contents(folder):
     return ((folder / "fuel_labels.zarr" / "chunk").read_text(),
             (folder / "fuel_summary.json").read_text())
@@ -85,11 +95,13 @@ def test_a_planted_lock_link_is_refused_and_its_target_untouched(tmp_path, capsy
     out = tmp_path / "out"
     out.mkdir()
     (out / ".fuel.volseg-lock").symlink_to("../victim.txt")
-    assert main(["segment", "fuel", "-o", str(out), "-q"]) == 2
+    assert main(["segment", _fuel_file(tmp_path), "-o", str(out), "-q"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "symbolic link" in err and ".fuel.volseg-lock" in err
     assert victim.read_text() == "precious"
     assert sorted(p.name for p in out.iterdir()) == [".fuel.volseg-lock"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fuel_12x12x12_uint8.raw", "out",
+                                                          "victim.txt"]
 
 
 @pytest.mark.parametrize("journal, problem", [
@@ -104,10 +116,11 @@ def test_a_planted_or_corrupt_journal_is_refused_with_one_line_and_nothing_moves
         tmp_path, capsys, journal, problem):
     out = tmp_path / "out"
     out.mkdir()
+    source = _fuel_file(tmp_path)
     staging = _staging(out, journal=journal)
     (staging / "escaped.txt").write_text("planted")
     before = sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*"))
-    assert main(["segment", "fuel", "-o", str(out), "-q"]) == 2
+    assert main(["segment", source, "-o", str(out), "-q"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and problem in err and str(staging / "COMMIT") in err
     assert "then remove" in err                     # what to do
@@ -117,7 +130,7 @@ def test_a_planted_or_corrupt_journal_is_refused_with_one_line_and_nothing_moves
     import shutil
 
     shutil.rmtree(staging)
-    assert main(["segment", "fuel", "-o", str(out), "-q"]) == 0
+    assert main(["segment", source, "-o", str(out), "-q"]) == 0
 
 
 def test_a_staging_link_is_refused(tmp_path):
