@@ -477,3 +477,38 @@ def test_budget_and_shape_limits_say_why(tmp_path, capsys):
     source.write_bytes(source.read_bytes()[:100])          # truncated while it is read
     with pytest.raises(VolumeFileError, match="truncated or replaced while volseg read it"):
         lazy.data.compute()
+
+
+def test_a_full_disk_names_the_folder_and_the_rerun_resumes(tmp_path, capsys, monkeypatch):
+    """ENOSPC in the middle of the blockwise work: one line naming the output folder,
+    nothing committed, the finished blocks kept; the rerun (space freed) finishes with
+    the labels of a run that never failed."""
+    import errno
+
+    from volseg.blockwise import _resume
+
+    data = _blob((20, 18, 16))
+    source = _raw(tmp_path / "v_20x18x16_uint8.raw", data)
+    argv = ["segment", str(source), "-q", "--chunks", "8", "--regions", "3"]
+    assert main([*argv, "-o", str(tmp_path / "clean")]) == 0
+    written = []
+    real = _resume.write_atomically
+
+    def fills_up(path, *args, **kwargs):
+        if len(written) == 5:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        written.append(path)
+        return real(path, *args, **kwargs)
+
+    monkeypatch.setattr(_resume, "write_atomically", fills_up)
+    capsys.readouterr()
+    assert main([*argv, "-o", str(tmp_path / "out")]) == 2
+    line = _one_clean_line(capsys.readouterr().err)
+    assert str(tmp_path / "out") in line and "disk is full" in line
+    assert _visible(tmp_path / "out") == []
+    assert len(list((tmp_path / "out" / ".v.volseg-work").rglob("*.npz"))) == 5
+    monkeypatch.setattr(_resume, "write_atomically", real)
+    assert main([*argv, "-o", str(tmp_path / "out")]) == 0
+    labels = [nibabel.load(tmp_path / f / "v_labels.nii.gz").get_fdata() for f in ("clean", "out")]
+    np.testing.assert_array_equal(*labels)
+    assert not (tmp_path / "out" / ".v.volseg-work").exists()

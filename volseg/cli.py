@@ -6,6 +6,7 @@ Exit codes: 0 done, 2 bad input or usage (one line on stderr), 1 unexpected fail
 from __future__ import annotations
 
 import argparse
+import re
 import signal
 import sys
 from contextlib import contextmanager
@@ -437,7 +438,7 @@ def main(argv=None) -> int:
         with _quiet_readers():
             return command(args)
     except (ValueError, OSError) as err:  # VolumeFileError, OutputError, UsageError, paths
-        print(f"volseg: error: {_one_line(err)}", file=sys.stderr)
+        print(f"volseg: error: {_disk_full(err, args) or _one_line(err)}", file=sys.stderr)
         return 2
     except MemoryError:
         print("volseg: error: not enough memory for this volume", file=sys.stderr)
@@ -488,6 +489,28 @@ def run():
         sys.stderr.flush()
         os._exit(code)
     sys.exit(code)
+
+
+def _disk_full(err, args) -> str | None:
+    """A full disk as the folder that filled, not numpy's "32768 requested and 1008
+    written" or an errno without a file name; None for any other error."""
+    import errno
+    import shutil
+
+    if not isinstance(err, OSError):
+        return None
+    short_write = err.errno is None and re.fullmatch(r"\d+ requested and \d+ written",
+                                                       str(err))
+    if not (err.errno == errno.ENOSPC or short_write):
+        return None
+    folder = Path(getattr(args, "out_dir", None) or err.filename or ".")
+    try:
+        free = f" ({shutil.disk_usage(folder).free / 1e9:.3g} GB free)"
+    except OSError:
+        free = ""
+    return (f"{folder}: the disk is full{free}; nothing was committed, and a blockwise "
+            "run's finished blocks are kept: free some space and run again to resume, or "
+            "write the outputs elsewhere (-o)")
 
 
 def _one_line(err) -> str:
