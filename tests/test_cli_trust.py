@@ -512,3 +512,35 @@ def test_a_full_disk_names_the_folder_and_the_rerun_resumes(tmp_path, capsys, mo
     labels = [nibabel.load(tmp_path / f / "v_labels.nii.gz").get_fdata() for f in ("clean", "out")]
     np.testing.assert_array_equal(*labels)
     assert not (tmp_path / "out" / ".v.volseg-work").exists()
+
+
+def test_lengths_that_would_overflow_the_operators_are_refused(tmp_path, capsys):
+    """Voxel sizes and time steps of 1e300 overflowed inside the curvature (45
+    RuntimeWarnings, then 'simplices have zero volume'); 1e-300 divided by zero. Inside
+    [1e-30, 1e30] the run is clean, warnings as errors; a NIfTI's (float32) 1e31 is
+    refused with its file name."""
+    import warnings
+
+    from volseg import segment_volume
+
+    data = _blob((10, 9, 8))
+    for spacing in (1e300, 1e-300, (1.0, 1e31, 1.0)):
+        with pytest.raises(ValueError, match=r"`spacing` must be three numbers .* in \[1e-30"):
+            segment_volume(data, spacing=spacing, n_regions=2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for spacing in (1e30, 1e-30, (1e-30, 1e30, 1.0)):
+            assert segment_volume(data, spacing=spacing, n_regions=2,
+                                  smooth_sigma=0).labels.max() == 2
+    image = nibabel.Nifti1Image(data, np.diag([1e31, 1e31, 1e31, 1.0]))
+    nibabel.save(image, tmp_path / "huge.nii.gz")
+    assert main(["segment", str(tmp_path / "huge.nii.gz"), "-o", str(tmp_path / "o")]) == 2
+    line = _one_clean_line(capsys.readouterr().err)
+    assert "huge.nii.gz: voxel sizes must be in [1e-30, 1e+30]" in line
+    series = np.stack([data.astype(np.float32)] * 3, axis=-1)
+    np.save(tmp_path / "t.npy", series)
+    for scale in ("1e300", "1e-300", "0", "nan"):
+        assert main(["isosurface", str(tmp_path / "t.npy"), "--level", "100", "-o",
+                     str(tmp_path / "o"), "--time-scale", scale]) == 2
+        assert "`--time-scale` must be a" in _one_clean_line(capsys.readouterr().err)
+    assert _visible(tmp_path / "o") == []

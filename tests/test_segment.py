@@ -43,8 +43,8 @@ def test_segment_errors():
 
 
 @pytest.mark.parametrize("kwargs, message", [
-    ({"spacing": (1.0, 2.0)}, "`spacing` must be three positive numbers"),
-    ({"spacing": (1.0, -1.0, 1.0)}, "`spacing` must be three positive numbers"),
+    ({"spacing": (1.0, 2.0)}, "`spacing` must be three numbers"),
+    ({"spacing": (1.0, -1.0, 1.0)}, "`spacing` must be three numbers"),
     ({"n_regions": 2.5}, "`n_regions` must be an integer"),
     ({"min_persistence": -0.1}, "`min_persistence` must be a non-negative number"),
 ])

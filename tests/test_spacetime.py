@@ -157,7 +157,7 @@ def test_cli_isosurface_writes_a_paraview_series(tmp_path, capsys):
 
 @pytest.mark.parametrize("extra, message", [
     (["--level", "7"], "is not crossed"),
-    (["--level", "0.5", "--time-scale", "0"], "--time-scale must be a positive number"),
+    (["--level", "0.5", "--time-scale", "0"], "`--time-scale` must be a positive number"),
     (["--level", "0.5", "--relax", "-1"], "numbers of rounds"),
     (["--level", "nan"], "--level must be a finite number"),
 ])

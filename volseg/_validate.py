@@ -56,6 +56,16 @@ def lazy_volume_array(array, name: str = "volume"):
     return array
 
 
+# Lengths of a grid step: the curvature operators multiply up to eight of them, which
+# stays finite (and above the denormals) in float64 inside this range.
+STEP_RANGE = (1e-30, 1e30)
+
+
+def _in_step_range(array) -> bool:
+    return bool(np.isfinite(array).all() and (array >= STEP_RANGE[0]).all()
+                and (array <= STEP_RANGE[1]).all())
+
+
 def spacing(value, default=(1.0, 1.0, 1.0)) -> tuple:
     """Three positive finite voxel sizes; a scalar means the same size on every axis."""
     if value is None:
@@ -63,9 +73,19 @@ def spacing(value, default=(1.0, 1.0, 1.0)) -> tuple:
     array = np.asarray(value, dtype=np.float64)
     if array.ndim == 0:
         array = np.repeat(array, 3)
-    if array.shape != (3,) or not (np.isfinite(array).all() and (array > 0).all()):
-        raise ValueError(f"`spacing` must be three positive numbers (dx, dy, dz), got {value!r}")
+    if array.shape != (3,) or not _in_step_range(array):
+        raise ValueError(f"`spacing` must be three numbers (dx, dy, dz) in [{STEP_RANGE[0]:g}, "
+                         f"{STEP_RANGE[1]:g}] (another length unit otherwise), got {value!r}")
     return tuple(float(s) for s in array)
+
+
+def step(value, name: str) -> float:
+    """One grid step's length (a time step's, say), in `STEP_RANGE` like `spacing`."""
+    result = number(value, name, positive=True)
+    if not _in_step_range(np.float64(result)):
+        raise ValueError(f"`{name}` must be a length in [{STEP_RANGE[0]:g}, {STEP_RANGE[1]:g}] "
+                         f"(another length unit otherwise), got {value!r}")
+    return result
 
 
 def number(value, name: str, *, positive: bool = False) -> float:

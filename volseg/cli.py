@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import _json
+from . import _json, _validate
 from ._version import __version__
 from .blockwise.engine import MEMORY_SHARE
 from .curvature import cli_choices, normalize_operator
@@ -291,8 +291,7 @@ def _cmd_isosurface(args):
     _check_cut_options(args)
     if not (np.isfinite(args.level)):
         raise UsageError(f"--level must be a finite number, got {args.level}")
-    if not (np.isfinite(args.time_scale) and args.time_scale > 0):
-        raise UsageError(f"--time-scale must be a positive number, got {args.time_scale}")
+    _validate.step(args.time_scale, "--time-scale")
     if args.relax < 0 or args.smooth_rounds < 0:
         raise UsageError(f"--relax and --smooth must be numbers of rounds >= 0, got "
                          f"{args.relax} and {args.smooth_rounds}")

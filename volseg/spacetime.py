@@ -168,7 +168,7 @@ def segment_series(
     smooth_rounds = _validate.renamed(smooth_rounds, smooth, "smooth_rounds", "smooth", 0)
     data = _validate.volume_array(field, "field", ndim=4)
     spacing = _validate.spacing(spacing)
-    time_scale = _validate.number(time_scale, "time_scale", positive=True)
+    time_scale = _validate.step(time_scale, "time_scale")
     relax = _validate.rounds(relax, "relax")
     steps = (*spacing, time_scale)
     timings = {}

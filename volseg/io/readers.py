@@ -506,7 +506,10 @@ def read_volume(path, *, shape=None, dtype=None, byte_order=None,
         data = _check(path, data)
     if frame is None:
         frame = Frame.from_spacing((1.0, 1.0, 1.0))
-    spacing = frame.spacing
-    if not all(np.isfinite(s) and s > 0 for s in spacing):
-        raise VolumeFileError(f"{path}: voxel sizes must be positive numbers, got {spacing}")
+    try:
+        _validate.spacing(frame.spacing)
+    except ValueError:
+        low, high = _validate.STEP_RANGE
+        raise VolumeFileError(f"{path}: voxel sizes must be in [{low:g}, {high:g}], got "
+                              f"{frame.spacing}") from None
     return Volume(data, frame=frame, name=short, source=source, path=path, files=files)

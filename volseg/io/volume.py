@@ -43,8 +43,10 @@ class Frame:
 
     def __post_init__(self):
         affine = np.array(self.affine, dtype=np.float64)
-        if affine.shape != (4, 4) or not np.isfinite(affine).all():
-            raise ValueError(f"`affine` must be a finite 4 x 4 matrix, got {affine.shape}")
+        if affine.shape != (4, 4):
+            raise ValueError(f"`affine` must be a finite 4 x 4 matrix, got shape {affine.shape}")
+        if not np.isfinite(affine).all():
+            raise ValueError(f"`affine` must be a finite 4 x 4 matrix, got {affine.tolist()}")
         if abs(np.linalg.det(affine[:3, :3])) < 1e-12 * max(1.0, np.abs(affine[:3, :3]).max()) ** 3:
             raise ValueError("`affine` is singular: its voxel axes do not span 3-D space")
         object.__setattr__(self, "affine", affine)
