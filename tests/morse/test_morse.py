@@ -304,6 +304,30 @@ def test_masked_grid_equals_the_explicit_restricted_graph(connectivity, kind):
     assert sorted(adjacency.nodes) == list(range(1, labels.max() + 1))
 
 
+
+@pytest.mark.parametrize("masked", [False, True])
+def test_region_adjacency_of_sparse_and_huge_labels(rng, masked):
+    """Labels {0, 7, 2^40} give the graph of {0, 1, 2} relabelled: no empty node per
+    unused label (there was one per gap, with maximum -1), and no 2^40-entry count."""
+    import networkx as nx
+
+    field = rng.random((7, 6, 5))
+    mask = np.ones(field.shape, bool)
+    mask[:2] = False
+    h = descending_complex(field, mask=mask if masked else None)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        labels = h.segment(n_regions=3).astype(np.int64)
+    names = {0: 0, 1: 7, 2: 2**40, 3: 2**40 + 5}
+    sparse = np.vectorize(names.get, otypes=[np.int64])(labels)
+    compact, spread = h.region_adjacency(labels), h.region_adjacency(sparse)
+    assert sorted(spread.nodes) == sorted(names[n] for n in compact.nodes)
+    relabelled = nx.relabel_nodes(compact, names)
+    assert dict(spread.nodes(data=True)) == dict(relabelled.nodes(data=True))
+    assert {frozenset(e): d for *e, d in spread.edges(data=True)} == \
+        {frozenset(e): d for *e, d in relabelled.edges(data=True)}
+    assert all(d["size"] > 0 and d["maximum"] >= 0 for _, d in spread.nodes(data=True))
+
 def test_mask_errors():
     field = np.zeros((4, 4, 4))
     with pytest.raises(ValueError, match="boolean array of the field's shape"):

@@ -408,22 +408,24 @@ class MorseHierarchy:
             inside = pairs[:, 0] > 0
             pairs, saddles, first = pairs[inside], saddles[inside], 1
         graph = nx.Graph()
-        flat_labels = labels.ravel()
         flat_field = f.ravel()
-        sizes = np.bincount(flat_labels)
+        # The labels present, compacted: sparse or huge labels (2^40) cost nothing.
+        regions, inverse, sizes = np.unique(labels.ravel(), return_inverse=True,
+                                            return_counts=True)
         # Highest vertex per region under simulation of simplicity: the last write wins.
         order = np.lexsort((np.arange(flat_field.size), flat_field))
-        top = np.full(len(sizes), -1)
-        top[flat_labels[order]] = order
-        for region in range(first, len(sizes)):
-            graph.add_node(region, size=int(sizes[region]), maximum=int(top[region]),
-                           value=float(flat_field[top[region]]))
+        top = np.full(len(regions), -1)
+        top[inverse.ravel()[order]] = order
+        for i in range(first if len(regions) and regions[0] == 0 else 0, len(regions)):
+            graph.add_node(int(regions[i]), size=int(sizes[i]), maximum=int(top[i]),
+                           value=float(flat_field[top[i]]))
         if len(pairs):
-            key = pairs[:, 0].astype(np.int64) * len(sizes) + pairs[:, 1]
+            n = np.int64(len(regions))
+            key = np.searchsorted(regions, pairs[:, 0]) * n + np.searchsorted(regions, pairs[:, 1])
             order = np.lexsort((saddles, key))
             last = np.r_[key[order][1:] != key[order][:-1], True]
             for k, s in zip(key[order][last], saddles[order][last], strict=True):
-                graph.add_edge(int(k // len(sizes)), int(k % len(sizes)), saddle=float(s))
+                graph.add_edge(int(regions[k // n]), int(regions[k % n]), saddle=float(s))
         return graph
 
 
