@@ -57,6 +57,43 @@ def test_otsu_is_scikit_images_threshold(dtype):
     assert choice.used == f"value>{float(threshold):g}"
 
 
+
+@pytest.mark.parametrize("dtype, offset", [
+    (np.int8, -128), (np.uint16, 65535 - 1000), (np.int32, -2**31),
+    (np.int64, 2**62), (np.int64, -2**63), (np.int64, 2**63 - 1001),
+    (np.uint64, 2**64 - 1001)])
+@pytest.mark.parametrize("lazy", [False, True])
+def test_integer_rules_do_not_move_with_the_values(dtype, offset, lazy):
+    """Otsu and auto on a volume shifted to its type's ends give the unshifted masks:
+    near 2^62 scikit-image asked for 2^62 bins, a uint64 near 2^64 raised IndexError,
+    and float64 thresholds (2048 apart there) selected none or all of the voxels."""
+    import dask.array as da
+
+    volume, _ = _head_phantom()
+    volume = volume.astype(np.int64)
+    span = 100 if np.dtype(dtype).itemsize == 1 else 1000
+    volume = np.clip(volume * span // max(int(volume.max()), 1), 0, span - 1)
+    shifted = volume.astype(dtype) + np.dtype(dtype).type(offset)
+    for rule in ("otsu", "auto"):
+        expected = foreground_mask(volume, rule)
+        got = foreground_mask(da.from_array(shifted, chunks=7) if lazy else shifted, rule)
+        assert (got.mask is None) == (expected.mask is None), rule
+        if expected.mask is not None:
+            assert np.array_equal(np.asarray(got.mask), expected.mask), rule
+
+
+def test_integers_spanning_more_than_a_million_values_get_256_bins():
+    """Otsu on an int64 spanning 2^62 (one bin per value would be 2^62 bins) equals
+    Otsu on its float64 copy, numpy and Dask alike."""
+    import dask.array as da
+
+    rng = np.random.default_rng(3)
+    values = np.concatenate([rng.normal(0.2, 0.03, 600), rng.normal(0.8, 0.05, 400)])
+    volume = np.round(values.clip(0, 1) * 2**62).astype(np.int64).reshape(10, 10, 10)
+    expected = volume.astype(np.float64) > threshold_otsu(volume.astype(np.float64))
+    for data in (volume, da.from_array(volume, chunks=4)):
+        assert np.array_equal(np.asarray(foreground_mask(data, "otsu").mask), expected)
+
 def test_rules_parse_without_data_and_a_boolean_array_is_taken_as_it_is():
     assert check_rule(" Value<=2.5 ") == ("value", ("<=", 2.5))
     assert check_rule("OTSU") == ("otsu", None)

@@ -39,6 +39,7 @@ A Dask volume (the blockwise path) gets the same mask, lazily (`foreground_mask`
 
 from __future__ import annotations
 
+import math
 import re
 from dataclasses import dataclass
 
@@ -141,7 +142,14 @@ def foreground_mask(volume, rule="auto", *, value_range=None) -> MaskChoice:
     if name == "otsu":
         from skimage.filters import threshold_otsu
 
-        threshold = float(threshold_otsu(hist=_histogram(data, lazy, value_range)))
+        counts, centers = _histogram(data, lazy, value_range)
+        if centers.dtype.kind in "iu":      # Otsu's class means in float64 on the offsets
+            base = centers[0].item()        # from the minimum (exact: centers near 2^63
+            offsets = np.arange(len(centers), dtype=np.int64)        # are 2048 apart)
+            threshold = base + threshold_otsu(hist=(counts, offsets)).item()
+        else:
+            threshold = threshold_otsu(hist=(counts, centers))
+        threshold = _level(threshold, data.dtype)
         return _checked(MaskChoice(data > threshold, "otsu", f"value>{threshold:g}", 0))
     op, value = threshold
     compare = {">": np.greater, ">=": np.greater_equal, "<": np.less, "<=": np.less_equal}[op]
@@ -207,7 +215,7 @@ def _low_mode(data, lazy: bool, lowest: float, highest: float):
     top = len(counts)
     if top > 2 and counts[-1] > 3 * counts[-2]:
         top -= 1            # a saturated top bin (values clipped at the type's maximum)
-    threshold = _triangle(counts[:top], centers[:top])
+    threshold = _level(_triangle(counts[:top], centers[:top]), data.dtype)
     above = counts[centers > threshold].sum() / data.size
     if threshold <= centers[peak] or 1 - above < AUTO_BACKGROUND_SHARE:
         return None
@@ -262,29 +270,66 @@ def _histogram(data, lazy: bool, value_range=None) -> tuple:
     """(counts, bin centres) of the volume as scikit-image's `exposure.histogram`
     makes it (integers: one bin per value from the minimum to the maximum; floats:
     256 bins over [min, max]), summed over the blocks for a Dask volume (its
-    `value_range` read first unless given)."""
-    if not lazy:
-        from skimage.exposure import histogram
-
-        return histogram(data.ravel(), 256, source_range="image")
-    import dask.array as da
-
+    `value_range` read first unless given). Integers spanning more than
+    `MAX_INTEGER_BINS` values get the 256 bins too (scikit-image asks for one bin
+    per value up to the maximum: 2^62 of them for an int64 near 2^62)."""
     lo, hi = value_range if value_range is not None else _range(data, lazy)
-    if data.dtype.kind in "biu":
+    if data.dtype.kind in "biu" and int(hi) - int(lo) < MAX_INTEGER_BINS:
         width = int(hi) - int(lo) + 1
+        if not lazy:
+            return _value_counts(data, lo, width), _value_centers(data.dtype, lo, width)
         counts = data.map_blocks(
-            lambda b: np.bincount((b.astype(np.int64) - int(lo)).ravel(),
-                                  minlength=width)[None, None, None], dtype=np.int64,
+            lambda b: _value_counts(b, lo, width)[None, None, None], dtype=np.int64,
             chunks=((1,) * data.numblocks[0], (1,) * data.numblocks[1],
                     (1,) * data.numblocks[2], (width,)), new_axis=3)
-        return _compute(counts.sum(axis=(0, 1, 2))), np.arange(int(lo), int(hi) + 1)
+        return _compute(counts.sum(axis=(0, 1, 2))), _value_centers(data.dtype, lo, width)
+    lo, hi = float(lo), float(hi)
     if lo == hi:
         return np.array([data.size]), np.array([lo])
-    counts, edges = da.histogram(data, bins=256, range=(lo, hi))
-    return _compute(counts), (edges[:-1] + edges[1:]) / 2
+    if lazy:
+        import dask.array as da
+
+        counts, edges = da.histogram(data, bins=256, range=(lo, hi))
+        counts = _compute(counts)
+    else:
+        counts, edges = np.histogram(data.ravel(), bins=256, range=(lo, hi))
+    return counts, (edges[:-1] + edges[1:]) / 2
 
 
-def _triangle(counts, centers) -> float:
+#: Integer volumes spanning fewer values than this get one histogram bin per value.
+MAX_INTEGER_BINS = 2**20
+
+
+def _integers(block):
+    """An integer block in a type where ``block - lo`` cannot overflow for a span
+    under `MAX_INTEGER_BINS` (64-bit types as they are: the span is small)."""
+    block = np.asarray(block)
+    return block if block.dtype.itemsize == 8 else block.astype(np.int64)
+
+
+def _value_counts(block, lo, width):
+    block = _integers(block)
+    offsets = (block - block.dtype.type(lo)).ravel().astype(np.intp)
+    return np.bincount(offsets, minlength=width)
+
+
+def _value_centers(dtype, lo, width):
+    kind = _integers(np.zeros(0, dtype)).dtype
+    return np.arange(width, dtype=kind) + kind.type(lo)
+
+
+def _level(threshold, dtype):
+    """A threshold as a level of the volume's type: an integer volume's exact (a
+    float near 2^62 compares equal to its neighbours), the floor of a float threshold
+    (``value > floor(t)`` is ``value > t`` for integers), clipped to the type."""
+    if np.dtype(dtype).kind not in "biu":
+        return float(threshold)
+    info = np.iinfo(np.dtype(dtype)) if np.dtype(dtype).kind != "b" else np.iinfo(np.uint8)
+    value = threshold.item() if isinstance(threshold, np.generic) else threshold
+    return int(min(max(math.floor(value), info.min), info.max))
+
+
+def _triangle(counts, centers):
     """The triangle threshold of a histogram (Zack, Rogers, Latt 1977), the algorithm
     of scikit-image's `threshold_triangle` (which takes no histogram): the level
     farthest below the line from the peak to the end of the longer tail."""
@@ -293,7 +338,7 @@ def _triangle(counts, centers) -> float:
     peak = int(np.argmax(counts))
     low, high = np.flatnonzero(counts)[[0, -1]]
     if low == high:
-        return float(centers[low])
+        return centers[low]
     flip = peak - low < high - peak
     if flip:
         counts, low, peak = counts[::-1], n - high - 1, n - peak - 1
@@ -301,7 +346,7 @@ def _triangle(counts, centers) -> float:
     x = np.arange(width)
     norm = np.hypot(counts[peak], width)
     level = int(np.argmax(counts[peak] / norm * x - width / norm * counts[x + low])) + low
-    return float(centers[n - level - 1] if flip else centers[level])
+    return centers[n - level - 1] if flip else centers[level]
 
 
 def _count(mask) -> int:
