@@ -225,3 +225,23 @@ def test_auto_smoothing_follows_the_type_and_the_noise():
     assert segment_volume(clean, smooth_sigma=0).smooth_rule == "given"
     result = segment_volume(clean)
     assert result.smooth_sigma == 1.0 and result.smooth_rule.startswith("auto: uint8")
+
+
+@pytest.mark.parametrize("dtype, offset", [(np.int64, 2**62), (np.int64, -2**63 + 7),
+                                           (np.uint64, 2**64 - 400)])
+@pytest.mark.parametrize("lazy", [False, True])
+def test_integers_beyond_2_to_53_segment_as_their_offsets(dtype, offset, lazy):
+    """A 64-bit volume near 2^62 is the same field as the unshifted one (the curvature
+    sees differences): in float64 its values were 1024 apart, labels differed and the
+    curvature by 1.3. Now the labels and curvature equal the unshifted run's."""
+    import dask.array as da
+
+    rng = np.random.default_rng(4)
+    volume = np.asarray(demo_volume(16).data, dtype=np.float64)[:, 1:, 2:]
+    volume = volume + rng.normal(0, 2, volume.shape)
+    volume = np.round(volume).clip(0, 250).astype(np.int64)
+    shifted = volume.astype(dtype) + np.dtype(dtype).type(offset)
+    expected = segment_volume(volume, n_regions=4)
+    got = segment_volume(da.from_array(shifted, chunks=5) if lazy else shifted, n_regions=4)
+    np.testing.assert_array_equal(np.asarray(got.labels), expected.labels)
+    np.testing.assert_allclose(np.asarray(got.curvature), expected.curvature, atol=1e-12)

@@ -336,6 +336,7 @@ def run_stages(data, request: SegmentRequest, storage: Storage | None = None, *,
         raise ValueError(f"{source} holds NaN or infinite values (its range is "
                          f"{value_range[0]} .. {value_range[1]}); replace them first")
     choice = foreground_mask(data, request.mask, value_range=value_range)   # values as read
+    data, shifted_range = _exact_in_float64(data, value_range)
     request = request.with_smoothing(data, choice.mask)
     storage.begin(choice, request)
     hooks = storage.block_hooks       # set by `begin` (the blockwise work folder's)
@@ -344,7 +345,7 @@ def run_stages(data, request: SegmentRequest, storage: Storage | None = None, *,
         values = storage.smoothed(gaussian(data, request.smooth_sigma))
         scale = request.value_scale
         if scale is None:
-            scale = _default_scale(values, request, value_range, source)
+            scale = _default_scale(values, request, shifted_range, source)
         curvature = storage.curvature(checked_grid_curvature(
             values, request.operator, request.spacing, scale, request.padding,
             block_hooks=hooks))
@@ -411,6 +412,25 @@ def _default_scale(values, request, value_range, source) -> float:
         raise ValueError(f"{source}: its values span {value_range[0]:g} .. {value_range[1]:g}, "
                          "too narrow or too wide a range for a default value scale; give "
                          "one (value_scale, --value-scale)") from None
+
+
+def _exact_in_float64(data, value_range) -> tuple:
+    """(data, its range) with 64-bit integers beyond 2^53 as offsets from the minimum:
+    float64 is 1024 apart near 2^62, so 2^62 + (0 .. 999) would be a few levels, and
+    the curvature (which only sees differences of values) the same as unshifted.
+    The offsets are exact: the difference wraps in the type, and read as uint64 it is
+    the true one (under 2^64)."""
+    lo, hi = value_range
+    if data.dtype.kind not in "iu" or max(abs(lo), abs(hi)) <= 2**53:
+        return data, value_range
+    base = data.dtype.type(lo)
+
+    def offsets(block):
+        return np.subtract(block, base, dtype=data.dtype).view(np.uint64)
+
+    shifted = (data.map_blocks(offsets, dtype=np.uint64) if _validate.is_lazy(data)
+               else offsets(np.asarray(data)))
+    return shifted, (0, int(hi) - int(lo))
 
 
 def _value_range(data, hooks) -> tuple:
