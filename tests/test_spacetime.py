@@ -190,3 +190,31 @@ def test_demo_time_follows_the_two_blobs(tmp_path, capsys):
     vertices, labels = saved["vertices"], saved["labels"]
     first = np.isclose(vertices[:, 3], 0) & (vertices[:, 0] < 1.0)
     assert len(np.unique(labels[first])) == 1
+
+
+def test_a_level_cutting_too_many_cells_is_refused_before_the_surface(tmp_path, capsys):
+    """A 3.2 MB noise series at its median needed more than 3.5 GB; the cut cells are
+    counted first and checked against the memory limit: one line, exit 2, nothing
+    written, under 50 MB (the surface of this one would take about 0.4 GB). Under the
+    limit the run is unchanged."""
+    import tracemalloc
+
+    from volseg.spacetime import BYTES_PER_CUT_CELL
+
+    noise = np.random.default_rng(0).random((12, 12, 12, 6)).astype(np.float32)
+    np.save(tmp_path / "noise.npy", noise)
+    tracemalloc.start()
+    code = main(["isosurface", str(tmp_path / "noise.npy"), "--level", "0.5", "-o",
+                 str(tmp_path / "out"), "-q", "--memory-limit", "100MB"])
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1, err
+    assert "noise.npy: the level 0.5 cuts" in err and "over the memory limit of 0.1 GB" in err
+    assert peak < 50e6 and not list((tmp_path / "out").iterdir())
+    with pytest.raises(ValueError, match="grid cells of the series"):
+        segment_series(noise, 0.5, memory_limit=BYTES_PER_CUT_CELL * 100)
+    series = demo_series(12, 4)
+    loose = segment_series(series, 0.5, relax=0, n_regions=3)
+    bound = segment_series(series, 0.5, relax=0, n_regions=3, memory_limit=2**34)
+    np.testing.assert_array_equal(loose.segmentation.labels, bound.segmentation.labels)

@@ -16,7 +16,7 @@ import numpy as np
 
 from . import _json, _validate
 from ._version import __version__
-from .blockwise.engine import MEMORY_SHARE
+from .blockwise.engine import MEMORY_SHARE, default_memory_limit, parse_bytes
 from .curvature import cli_choices, normalize_operator
 from .errors import UsageError
 from .morse import MEASURES
@@ -168,6 +168,10 @@ def _add_isosurface(sub):
     iso.add_argument("--wait", action="store_true",
                      help="wait for another volseg writing the same outputs")
     iso.add_argument("--allow-external-data", action="store_true")
+    iso.add_argument("--memory-limit", metavar="BYTES",
+                     help="memory budget, e.g. 12GB or 0.5 (a share of RAM; default "
+                     f"{MEMORY_SHARE:g} of this machine's RAM): a level cutting more grid cells "
+                     "than fit (about 64 KB each) is refused before the surface is made")
     iso.add_argument("--json", action="store_true", help="print the summary as JSON on stdout")
     iso.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
 
@@ -308,7 +312,9 @@ def _cmd_isosurface(args):
         series, args.level, out_dir, force=args.force, wait=args.wait, say=say,
         time_scale=args.time_scale, relax=args.relax, operator=normalize_operator(args.operator),
         n_regions=args.regions, min_persistence=args.min_persistence, boundary=args.boundary,
-        smooth_rounds=args.smooth_rounds)
+        smooth_rounds=args.smooth_rounds,
+        memory_limit=default_memory_limit() if args.memory_limit is None
+        else parse_bytes(args.memory_limit))
     if args.json:
         print(_json.dumps(summary, indent=2))
     return 0

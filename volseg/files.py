@@ -326,7 +326,7 @@ def _storage(volume, data, request, paths, outputs, checksum, engine, say):
 
 def series_to_files(series, level, outputs, *, time_scale=1.0, relax=10, operator="weighted",
                     n_regions=None, min_persistence=None, boundary="partial", smooth_rounds=10,
-                    say=_quiet) -> dict:
+                    memory_limit=None, say=_quiet) -> dict:
     """Segment the space-time isosurface of `series` and write its output set (an
     entered `OutputSet` named by `volseg.outputs.spacetime.series_output_names`);
     returns the summary."""
@@ -336,10 +336,14 @@ def series_to_files(series, level, outputs, *, time_scale=1.0, relax=10, operato
     started = time.perf_counter()
     say(f"{series.name}: isosurface at {level:g} of a {'x'.join(map(str, series.shape))} "
         f"series, {relax} relaxation rounds, {operator} curvature, Morse complex")
-    result = segment_series(series.data, level, spacing=series.spacing, time_scale=time_scale,
-                            relax=relax, operator=operator, n_regions=n_regions,
-                            min_persistence=min_persistence, boundary=boundary,
-                            smooth_rounds=smooth_rounds)
+    try:
+        result = segment_series(series.data, level, spacing=series.spacing,
+                                time_scale=time_scale, relax=relax, operator=operator,
+                                n_regions=n_regions, min_persistence=min_persistence,
+                                boundary=boundary, smooth_rounds=smooth_rounds,
+                                memory_limit=memory_limit)
+    except ValueError as err:           # what the series' values refuse, named by its file
+        raise ValueError(f"{series.files[0] if series.files else series.name}: {err}") from None
     slices = result.slices()
     seg = result.segmentation
     say(f"{series.name}: {len(result.surface.vertices)} vertices, "

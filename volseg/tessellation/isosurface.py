@@ -269,8 +269,17 @@ def _collapse(edges: NDArray, fraction: NDArray, simplices: NDArray, snap: float
     return edges, _moved_off(edges, values, level, np.unique(point[point >= 0])), simplices
 
 
+class TooManyCutCells(ValueError):
+    """The level cuts more grid cells than `isosurface`'s `max_cut_cells`."""
+
+    def __init__(self, cells: int, limit: int, level: float):
+        super().__init__(f"the level {level:g} cuts {cells:,} grid cells, more than "
+                         f"`max_cut_cells` = {limit:,}")
+        self.cells, self.limit = cells, limit
+
+
 def isosurface(field: ArrayLike, level: float, *, spacing=None, origin=None,
-               snap: float = 1e-6) -> Isosurface:
+               snap: float = 1e-6, max_cut_cells: int | None = None) -> Isosurface:
     """The level set ``{F = level}`` of a field sampled on a d-D grid, as a (d-1)-manifold.
 
     Parameters
@@ -294,6 +303,11 @@ def isosurface(field: ArrayLike, level: float, *, spacing=None, origin=None,
         break the manifold or leave a flat simplex (a critical point of the
         interpolant at the level), that sample is instead moved off the level by a
         tenth of its smallest gap across it, so its crossings stay apart.
+    max_cut_cells : int, optional
+        Refuse (`TooManyCutCells`) a level that cuts more grid cells than this,
+        before any simplex is made. A cut cell is d! Kuhn simplices, each cut into
+        up to C(d - 1, (d - 1) // 2) pieces (72 in 4-D); a noise field at its median
+        cuts almost every cell.
 
     Returns
     -------
@@ -340,6 +354,8 @@ def isosurface(field: ArrayLike, level: float, *, spacing=None, origin=None,
         np.maximum(highest, view, out=highest)
     cut = np.flatnonzero((lowest < level) & (highest >= level))
     del lowest, highest
+    if max_cut_cells is not None and len(cut) > max_cut_cells:
+        raise TooManyCutCells(len(cut), int(max_cut_cells), level)
     corners = np.ravel_multi_index(np.unravel_index(cut, cube_shape), shape).astype(np.int64)
     offsets = cube_paths(d) @ strides                     # (d!, d+1), increasing along paths
     values = array.ravel()
