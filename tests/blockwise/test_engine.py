@@ -183,3 +183,37 @@ def test_an_input_above_the_memory_limit_takes_the_blockwise_path(tmp_path, volu
     assert (tmp_path / "big" / "vol_labels.nii.gz").is_file()
     assert np.array_equal(zarr.open(str(tmp_path / "small" / "vol_labels.zarr"), mode="r")[:],
                           np.asarray(read_volume(tmp_path / "big" / "vol_labels.nii.gz").data))
+
+
+@pytest.mark.slow
+def test_a_cluster_that_cannot_go_on_stops_with_one_line(monkeypatch):
+    """A worker paused at its memory limit with work pending waited forever (its log
+    lines flooding stderr); one that dies over its limit ended in exit 1 KilledWorker.
+    Both are now an `EngineError` naming the stage and the per-worker limit."""
+    import time
+
+    monkeypatch.setattr(engine_module, "STALL_SECONDS", 3.0)
+
+    def hold(megabytes):            # unmanaged memory the worker cannot spill
+        import builtins
+        import time
+
+        builtins.volseg_test_hold = np.ones(int(megabytes * 2**20) // 8)
+        time.sleep(1.0)             # the worker's memory monitor pauses it meanwhile
+        return 1
+
+    def later(x):
+        return x + 1
+
+    # 800 MiB and the process's 60 - 120: above the pause (80 %), below the kill (95 %).
+    with engine_module.Engine("local", workers=1, memory_limit="1GiB") as engine:
+        held = dask.delayed(hold)(800)
+        started = time.monotonic()
+        with pytest.raises(engine_module.EngineError,
+                           match=r"^stalled: every Dask worker has been paused .* for 3 s "
+                                 r"with work pending \(1024 MiB per worker\)"):
+            engine.compute(dask.delayed(later)(held), dask.delayed(later)(5), stage="stalled")
+        assert time.monotonic() - started < 40
+    with engine_module.Engine("local", workers=1, memory_limit="300MiB") as engine:
+        with pytest.raises(engine_module.EngineError, match=r"^killed: Dask workers died"):
+            engine.compute(dask.delayed(hold)(400), stage="killed")

@@ -174,9 +174,13 @@ class Engine:
             raise
         return self
 
-    def __exit__(self, *exc):
+    def __exit__(self, kind, error, traceback):
         self._stack.close()
         self.client = None
+        if kind is not None and kind.__name__ == "KilledWorker":     # outside `compute`
+            raise EngineError(f"Dask workers died running the same task, over their memory "
+                              f"limit ({self._per_worker()}); give more --memory-limit, fewer "
+                              "--workers or smaller --chunks") from None
 
     def check(self) -> None:
         """For a scheduler address: connect once now, so that an unreachable one is an
@@ -195,7 +199,7 @@ class Engine:
         # caller's level is back when the engine exits.
         logger = logging.getLogger("distributed")
         self._stack.callback(logger.setLevel, logger.level)
-        logger.setLevel(logging.WARNING)
+        logger.setLevel(logging.CRITICAL)
         if self.scheduler != "local":
             previous = dask.config.get("scheduler", None)
             try:
@@ -217,9 +221,12 @@ class Engine:
                 f"--memory-limit {self.memory_limit / 2**20:.0f} MiB over {self.workers} workers "
                 f"leaves each less than the {MIN_WORKER_MEMORY // 2**20} MiB a worker needs to "
                 "make progress (its process alone); give more, or fewer --workers")
+        # The workers' and nanny's log lines (pausing, restarting) are not volseg's
+        # either: what stops the run, `compute` says in its own line.
         cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
                                memory_limit=self.memory_limit // self.workers,
-                               dashboard_address=None, env={"NUMBA_NUM_THREADS": "1"})
+                               dashboard_address=None, env={"NUMBA_NUM_THREADS": "1"},
+                               silence_logs=logging.CRITICAL)
         self._stack.callback(cluster.close)
         return Client(cluster)
 
@@ -233,18 +240,93 @@ class Engine:
             # Lookup tables are sent once, as their own task, on purpose; a distributed
             # client warns of any graph over 10 MB.
             warnings.filterwarnings("ignore", message="Sending large graph")
+            if self.progress:
+                print(f"  {stage}", file=sys.stderr, flush=True)
+            if self.client is not None:
+                return self._watched(collections, stage)
             if not self.progress:
                 return dask.compute(*collections)
-            print(f"  {stage}", file=sys.stderr, flush=True)
-            if self.client is None:
-                from dask.diagnostics import ProgressBar
+            from dask.diagnostics import ProgressBar
 
-                with ProgressBar(out=sys.stderr, minimum=1.0):
-                    return dask.compute(*collections)
-            from distributed import progress
+            with ProgressBar(out=sys.stderr, minimum=1.0):
+                return dask.compute(*collections)
 
-            futures = self.client.compute(list(collections))
-            with contextlib.redirect_stdout(sys.stderr):
-                progress(futures, notebook=False)
-                print(file=sys.stderr)
-            return tuple(self.client.gather(futures))
+    def _watched(self, collections, stage: str):
+        """The distributed compute of `compute`, stopped with one line when the
+        cluster cannot go on: a task whose workers died `KilledWorker` times (over
+        their memory limit), or every worker paused at its limit for `STALL_SECONDS`
+        with work pending (distributed waits forever then)."""
+        from concurrent.futures import CancelledError
+
+        from distributed import KilledWorker, progress
+
+        futures = self.client.compute(list(collections))
+        watchdog = _Watchdog(self.client, futures, STALL_SECONDS)
+        try:
+            with watchdog:
+                if self.progress:
+                    with contextlib.redirect_stdout(sys.stderr):
+                        progress(futures, notebook=False)
+                        print(file=sys.stderr)
+                return tuple(self.client.gather(futures))
+        except KilledWorker:
+            self.client.cancel(futures)
+            raise EngineError(
+                f"{stage}: Dask workers died running the same task, over their memory limit "
+                f"({self._per_worker()}); give more --memory-limit, fewer --workers or "
+                "smaller --chunks") from None
+        except CancelledError:
+            if watchdog.reason is None:
+                raise
+            raise EngineError(f"{stage}: {watchdog.reason} ({self._per_worker()}); give more "
+                              "--memory-limit, fewer --workers or smaller --chunks") from None
+
+    def _per_worker(self) -> str:
+        if self.scheduler == "local":
+            return f"{self.memory_limit / self.workers / 2**20:.0f} MiB per worker"
+        return f"the cluster at {self.scheduler}"
+
+
+#: Every worker paused at its memory limit this long, with work pending: the run stops.
+STALL_SECONDS = 60.0
+
+
+class _Watchdog:
+    """A thread that cancels `futures` when every worker of `client` has been paused
+    (at its memory limit) for `seconds` while some future is pending; `reason` says so."""
+
+    def __init__(self, client, futures, seconds: float, interval: float = 1.0):
+        import threading
+
+        self.client, self.futures, self.seconds, self.interval = client, futures, seconds, interval
+        self.reason = None
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True, name="volseg-watchdog")
+
+    def __enter__(self):
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc):
+        self._stop.set()
+        self._thread.join()
+
+    def _run(self):
+        import time
+
+        paused_since = None
+        while not self._stop.wait(self.interval):
+            try:
+                workers = self.client.scheduler_info()["workers"].values()
+            except Exception:  # noqa: BLE001 - the compute itself reports a lost cluster
+                return
+            pending = any(not f.done() for f in self.futures)
+            if pending and workers and all(w.get("status") == "paused" for w in workers):
+                paused_since = paused_since or time.monotonic()
+                if time.monotonic() - paused_since >= self.seconds:
+                    self.reason = (f"every Dask worker has been paused at its memory limit for "
+                                   f"{self.seconds:g} s with work pending")
+                    self.client.cancel(self.futures)
+                    return
+            else:
+                paused_since = None
