@@ -197,3 +197,22 @@ def test_measure_threshold_and_min_component_options(tmp_path, capsys, volvis_di
                           (["--min-component", "1.5"], "--min-component must be")):
         assert main(["segment", "silicium", "-o", str(tmp_path / "x"), *argv]) == 2
         assert message in capsys.readouterr().err
+
+
+def test_compare_takes_whole_float_labels_and_names_a_file_of_fractions(tmp_path, capsys):
+    """FSL and others write label maps as float32: whole numbers are labels; a file of
+    fractions is refused by name (it said 'label volumes must hold integer labels')."""
+    a = np.zeros((4, 4, 4), np.int32)
+    b = a.copy()
+    b[2:] = 1
+    np.save(tmp_path / "a.npy", a)
+    np.save(tmp_path / "b.npy", b.astype(np.float32))
+    assert main(["compare", str(tmp_path / "a.npy"), str(tmp_path / "b.npy"), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["hamming_similarity"] == 0.75
+    c = b.astype(np.float32)
+    c[3, 2, 1] = 0.5
+    np.save(tmp_path / "c.npy", c)
+    assert main(["compare", str(tmp_path / "a.npy"), str(tmp_path / "c.npy")]) == 2
+    line = capsys.readouterr().err.strip()
+    assert line == (f"volseg: error: {tmp_path / 'c.npy'}: label volumes must hold integer "
+                    "labels, got float32 0.5 at voxel [3, 2, 1]")

@@ -395,14 +395,26 @@ def _cmd_info(args):
     return 0
 
 
+def _integer_labels(data, path):
+    """Labels as integers: float files of whole numbers (FSL writes label maps as
+    float32) taken as they are, anything else refused naming the file."""
+    data = np.asarray(data)
+    if data.dtype.kind != "f":
+        return data
+    whole = np.isfinite(data) & (data == np.round(data))
+    if not whole.all():
+        first = tuple(int(i) for i in np.argwhere(~whole)[0])
+        raise UsageError(f"{path}: label volumes must hold integer labels, got {data.dtype} "
+                         f"{float(data[first]):g} at voxel {list(first)}")
+    return data.astype(np.int64)
+
+
 def _cmd_compare(args):
     from . import metrics
     from .files import load_volume
 
-    a = load_volume(args.labels_a).data
-    b = load_volume(args.labels_b).data
-    if a.dtype.kind == "f" or b.dtype.kind == "f":
-        raise UsageError("label volumes must hold integer labels")
+    a = _integer_labels(load_volume(args.labels_a).data, args.labels_a)
+    b = _integer_labels(load_volume(args.labels_b).data, args.labels_b)
     if a.shape != b.shape:
         raise UsageError(f"{args.labels_a} is {a.shape} but {args.labels_b} is {b.shape}")
     mask = None

@@ -87,7 +87,8 @@ def _check_outcome(folder, files):
     try:
         volume = read_volume(first)
     except VolumeFileError as err:
-        assert str(first.parent) in str(err)  # the message names the file
+        # The message names the file that is wrong (the header, or the data it names).
+        assert any(str(folder / name) in str(err) for name in files), str(err)
         return
     finally:  # the process's high-water mark: a reader allocating a declared size shows here
         assert (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - peak) / 1024 < 256

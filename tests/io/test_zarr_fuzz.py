@@ -151,6 +151,7 @@ def test_mutated_zarr_stores_are_read_as_zarr_reads_them_or_refused(tmp_path, ca
         err = capsys.readouterr().err
         assert code in (0, 2), (case, err)
         assert code == 0 or (err.count("\n") == 1 and err.startswith("volseg: error: ")), err
+        assert code == 0 or str(store) in err, err          # the line names the store
         outcomes[code] += 1
         if code == 0:            # accepted: exactly the voxels Zarr reads
             got = np.asarray(read_volume(store, allow_external_data=False).data)
