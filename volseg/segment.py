@@ -372,9 +372,7 @@ def _morse_and_cut(field, cut: CutRequest, timings, *, mask=None, adjacency=None
     with _timed(timings, "cut"):
         asked = cut.of(hierarchy)
         region = hierarchy.region_of_maximum(**asked)
-        labels = hierarchy.relabel(region)
-        if hierarchy.mask is None:
-            labels += 1  # regions 1..k; 0 is kept for voxels outside a mask
+        labels = hierarchy.relabel(region)     # regions 1..k, 0 outside a mask
         k = int(region.max()) + 1
     with _timed(timings, "labels"):
         labels = storage.labels(labels, k)

@@ -71,7 +71,7 @@ def test_grid_errors():
         grid_curvature(np.zeros((4, 4, 1)))
     with pytest.raises(ValueError, match="NaN or infinite values"):
         grid_curvature(np.full((3, 3, 3), np.inf))
-    with pytest.raises(ValueError, match="`spacing` must be three positive"):
+    with pytest.raises(ValueError, match="`spacing` must be three numbers"):
         grid_curvature(np.zeros((3, 3, 3)), spacing=(1, 0, 1))
     with pytest.raises(ValueError, match="`value_scale` must be a positive"):
         grid_curvature(np.zeros((3, 3, 3)), value_scale=-1)

@@ -18,9 +18,9 @@ def test_two_peaks_in_1d_by_hand():
     assert h.persistence.tolist() == [np.inf, 1.0]  # 2 - 1 at the saddle x = 2
     assert h.saddle.tolist() == [2] and h.saddle_value.tolist() == [1.0]
     # The saddle vertex climbs to its highest neighbour (3.0 at x = 1).
-    assert_array_equal(h.segment(), [0, 0, 0, 1, 1])
-    assert_array_equal(h.segment(min_persistence=1.0), [0, 0, 0, 1, 1])
-    assert_array_equal(h.segment(min_persistence=1.01), [0, 0, 0, 0, 0])
+    assert_array_equal(h.segment(), [1, 1, 1, 2, 2])
+    assert_array_equal(h.segment(min_persistence=1.0), [1, 1, 1, 2, 2])
+    assert_array_equal(h.segment(min_persistence=1.01), [1, 1, 1, 1, 1])
 
 
 def test_plateau_ties_break_by_index():
@@ -29,7 +29,7 @@ def test_plateau_ties_break_by_index():
     h = descending_complex(f)
     assert h.maxima.tolist() == [4, 2]
     # Vertex 3 (value 0) climbs to its highest neighbour: 4, equal in value to 2 but higher.
-    assert_array_equal(h.segment(), [1, 1, 1, 0, 0])
+    assert_array_equal(h.segment(), [2, 2, 2, 1, 1])
     assert h.persistence.tolist() == [np.inf, 1.0]
 
 
@@ -44,7 +44,7 @@ def test_2d_known_saddle():
     assert saddle == (2, 3)
     assert np.isclose(h.persistence[1], f[2, 5] - f[2, 3])
     graph = h.region_adjacency()
-    assert graph.number_of_nodes() == 2 and np.isclose(graph.edges[0, 1]["saddle"], f[2, 3])
+    assert graph.number_of_nodes() == 2 and np.isclose(graph.edges[1, 2]["saddle"], f[2, 3])
 
 
 @pytest.mark.parametrize("shape", [(40,), (17, 19), (11, 12, 13)])
@@ -59,15 +59,15 @@ def test_region_count_law_and_monotone_and_connected(shape, rng):
     structure[(1,) * len(shape)] = True
     for t in np.r_[0, np.quantile(p[np.isfinite(p)], [0.1, 0.5, 0.9]), p[np.isfinite(p)].max() + 1]:
         labels = h.segment(min_persistence=t)
-        k = labels.max() + 1
+        k = labels.max()
         assert k == 1 + np.sum(np.isfinite(p) & (p >= t))
         assert k <= previous
         previous = k
-        assert labels.min() == 0 and len(np.unique(labels)) == k  # every voxel labelled
-        for region in range(k):
+        assert labels.min() == 1 and len(np.unique(labels)) == k  # every voxel labelled
+        for region in range(1, k + 1):
             _, parts = ndimage.label(labels == region, structure=structure)
             assert parts == 1, (t, region)
-        tops = [f.ravel()[np.flatnonzero(labels.ravel() == r)].max() for r in range(k)]
+        tops = [f.ravel()[np.flatnonzero(labels.ravel() == r)].max() for r in range(1, k + 1)]
         assert tops == sorted(tops, reverse=True)  # ordered by decreasing maximum
 
 
@@ -75,11 +75,11 @@ def test_n_regions_is_exact_and_warns_when_too_many(rng):
     f = smooth_random_field((20, 20, 20), rng, sigma=1.5)
     h = descending_complex(f)
     for k in [1, 2, 7, len(h.maxima)]:
-        assert h.segment(n_regions=k).max() + 1 == k
-        assert h.segment(min_persistence=h.threshold_for(k)).max() + 1 == k
+        assert h.segment(n_regions=k).max() == k
+        assert h.segment(min_persistence=h.threshold_for(k)).max() == k
     with pytest.warns(UserWarning, match="only"):
         labels = h.segment(n_regions=len(h.maxima) + 5)
-    assert labels.max() + 1 == len(h.maxima)
+    assert labels.max() == len(h.maxima)
 
 
 def test_persistence_equals_gudhi_cubical_on_6_connected_grids(rng):
@@ -129,7 +129,7 @@ def test_disconnected_graph_keeps_one_region_per_component():
     h = descending_complex(np.array([1.0, 2.0, 5.0, 4.0]), adjacency=np.array([[0, 1], [2, 3]]))
     assert h.n_components == 2
     with pytest.warns(UserWarning, match="connected components"):
-        assert h.segment(n_regions=1).max() == 1
+        assert h.segment(n_regions=1).max() == 2
 
 
 def test_bad_input_is_a_clear_error():
@@ -296,7 +296,7 @@ def test_masked_grid_equals_the_explicit_restricted_graph(connectivity, kind):
         with expected():
             other = graph.segment(**cut)
         assert (labels[~mask] == 0).all()
-        assert_array_equal(labels[mask], other + 1)
+        assert_array_equal(labels[mask], other)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)   # the same warning, asserted above
         labels = grid.segment(n_regions=5)

@@ -40,7 +40,7 @@ Examples
 >>> hierarchy.maxima.tolist(), hierarchy.persistence.tolist()
 ([1, 3], [inf, 1.0])
 >>> hierarchy.segment().tolist(), hierarchy.segment(n_regions=1).tolist()
-([0, 0, 0, 1, 1], [0, 0, 0, 0, 0])
+([1, 1, 1, 2, 2], [1, 1, 1, 1, 1])
 """
 
 from __future__ import annotations

@@ -92,8 +92,8 @@ class MorseHierarchy:
         crossing between the two components).
     saddle_value : (E,) ndarray of float
     mask : bool ndarray of `shape`, or None
-        The vertices that took part; cuts label the others 0 and regions 1..k.
-        Without a mask, regions are 0..k-1.
+        The vertices that took part; cuts label the others 0. Regions are 1..k
+        with or without a mask (before 0.2, 0..k-1 without one).
     timings : dict
         Seconds per phase of the build (steepest ascent, path compression, ...).
     vertex_weight : float, (V,) ndarray, or None
@@ -290,10 +290,11 @@ class MorseHierarchy:
     def region_of_maximum(self, min_persistence=None, n_regions=None, *,
                           measure="persistence", threshold=None,
                           min_component=0.0) -> NDArray[np.int32]:
-        """(M,) region label of each maximum for a cut (see `segment`): the maxima
-        joined by the merged events, regions numbered by their highest maximum (a
-        compiled union-find: 8 M maxima take a few hundred ms and a few bytes each);
-        -1 for the maxima of a dropped component (`min_component`)."""
+        """(M,) region index 0..k-1 of each maximum for a cut (see `segment`; the
+        label is the index + 1): the maxima joined by the merged events, regions
+        numbered by their highest maximum (a compiled union-find: 8 M maxima take a
+        few hundred ms and a few bytes each); -1 for the maxima of a dropped
+        component (`min_component`)."""
         dropped = self.small_components(min_component)
         merged = self._merged_events(min_persistence, n_regions, measure, threshold, dropped)
         region = np.empty(len(self.maxima), dtype=np.int32)
@@ -339,17 +340,19 @@ class MorseHierarchy:
         Returns
         -------
         ndarray of int32, `shape`
-            Consecutive labels 0..k-1, ordered by decreasing maximum value; with a
-            mask, 0 outside it and regions 1..k. Every region is connected.
+            Consecutive labels 1..k, ordered by decreasing maximum value; 0 for the
+            vertices outside the mask or in a dropped component. Every region is
+            connected. (Before volseg 0.2, 0..k-1 without a mask: region 0 showed as
+            background in napari, ITK-SNAP and Slicer.)
         """
         return self.relabel(self.region_of_maximum(min_persistence, n_regions, measure=measure,
                                                    threshold=threshold,
                                                    min_component=min_component))
 
     def relabel(self, region):
-        """Labels of every vertex from the region of each maximum (the result of
-        `region_of_maximum`): what `segment` returns, for a caller that needs the
-        regions too."""
+        """Labels 1..k of every vertex from the region index of each maximum (the
+        result of `region_of_maximum`), 0 outside the mask: what `segment` returns,
+        for a caller that needs the regions too."""
         if type(self.cells).__module__.startswith("dask."):   # blockwise: relabel per block
             import dask
 
@@ -449,12 +452,9 @@ def _all_but_most_persistent(p, young, keep):
 
 
 def _with_outside(region, mask):
-    """The relabelling table of a cut: `region` without a mask; with one, regions
-    1..k and a last entry 0 for the cells of -1 (outside the mask) and for the regions
-    -1 (dropped components)."""
-    if mask is None:
-        if region.size and region.min() < 0:
-            raise ValueError("only a hierarchy with a mask can drop components "
-                             "(`min_component`): label 0 is outside the mask")
-        return region
+    """The relabelling table of a cut: regions 1..k, and a last entry 0 for the cells
+    of -1 (outside the mask) and for the regions -1 (dropped components)."""
+    if mask is None and region.size and region.min() < 0:
+        raise ValueError("only a hierarchy with a mask can drop components "
+                         "(`min_component`): label 0 is outside the mask")
     return np.concatenate([region + 1, np.zeros(1, dtype=region.dtype)])
