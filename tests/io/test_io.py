@@ -350,3 +350,19 @@ def test_output_set_refuses_existing_files_and_removes_its_staging(tmp_path):
         out.commit(lambda p: p["a"].write_text("2"))  # a writer that forgot a file
     assert (tmp_path / "s_a.txt").read_text() == "1"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["s_a.txt", "s_b.txt"]
+
+
+@pytest.mark.parametrize("suffix", [".nii.gz", ".nrrd"])
+def test_the_length_unit_survives_a_write_and_a_read(tmp_path, suffix):
+    """The input's unit reaches the outputs (NIfTI xyzt_units, NRRD space units); an
+    unknown unit stays unknown, not a hard-coded mm."""
+    from volseg.io import Frame, read_volume, write_volume
+
+    data = np.arange(60, dtype=np.uint8).reshape(5, 4, 3)
+    for unit in ("micrometer", "millimeter", None):
+        frame = Frame.from_spacing((0.5, 0.25, 2.0), unit=unit)
+        path = write_volume(tmp_path / f"v{suffix}", data, frame=frame)
+        back = read_volume(path)
+        assert back.frame.unit == unit and back.spacing == (0.5, 0.25, 2.0)
+    with pytest.raises(ValueError, match="`unit` must be one of"):
+        Frame.from_spacing((1, 1, 1), unit="furlong")

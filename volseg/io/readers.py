@@ -24,7 +24,7 @@ from ._files import (
     read_head,
     regular_file_size,
 )
-from .volume import Frame, Volume, VolumeFileError
+from .volume import Frame, Volume, VolumeFileError, length_unit
 
 __all__ = ["read_volume", "DTYPES"]
 
@@ -163,6 +163,14 @@ def _read_dat(path: Path, shape, dtype, byte_order, allow_external, mapped=False
 
 
 def _nrrd_frame(path, fields) -> Frame | None:
+    frame = _nrrd_geometry(path, fields)
+    units = re.findall(r'"([^"]*)"', fields.get("space units", ""))
+    if frame is not None and units and len(set(units)) == 1:    # one unit on every axis
+        return frame.with_unit(length_unit(units[0]))
+    return frame
+
+
+def _nrrd_geometry(path, fields) -> Frame | None:
     if "space directions" in fields:
         vectors = re.findall(r"\(([^)]*)\)", fields["space directions"])
         if len(vectors) != 3:
@@ -295,7 +303,8 @@ def _read_nifti(path: Path, shape, dtype, byte_order, allow_external, mapped=Fal
     same = qform is None or np.allclose(qform, affine, atol=1e-6)
     try:
         frame = Frame(affine, sform_code=int(sform_code), qform_code=int(qform_code),
-                      qform=None if same else qform)
+                      qform=None if same else qform,
+                      unit=length_unit(image.header.get_xyzt_units()[0]))
     except ValueError as err:
         raise VolumeFileError(f"{path}: the NIfTI affine: {err}") from None
     name = path.name[: -len(".nii.gz")] if path.name.lower().endswith(".nii.gz") else path.stem

@@ -11,11 +11,28 @@ from numpy.typing import NDArray
 
 from ..errors import VolumeFileError  # noqa: F401 (re-exported)
 
-__all__ = ["Volume", "Frame", "VolumeFileError"]
+__all__ = ["Volume", "Frame", "VolumeFileError", "LENGTH_UNITS", "length_unit"]
 
 
 #: NIfTI xform codes: 0 unknown, 1 scanner, 2 aligned, 3 Talairach, 4 MNI, 5 template.
 _CODES = range(0, 6)
+
+#: The length units of OME-Zarr (NGFF 0.4 / 0.5, UDUNITS-2 names) that volseg keeps.
+LENGTH_UNITS = ("angstrom", "nanometer", "micrometer", "millimeter", "centimeter", "meter",
+                "kilometer", "inch", "foot")
+#: Other spellings headers use (NIfTI's 'mm' and 'micron', NRRD's 'mm', 'um', 'µm').
+UNIT_ALIASES = {"mm": "millimeter", "micron": "micrometer", "um": "micrometer",
+                "µm": "micrometer", "μm": "micrometer", "nm": "nanometer", "cm": "centimeter",
+                "m": "meter", "km": "kilometer", "in": "inch", "ft": "foot"}
+
+
+def length_unit(name) -> str | None:
+    """A header's length unit as a `LENGTH_UNITS` name, or None (unknown, unlisted)."""
+    if not isinstance(name, str):
+        return None
+    name = name.strip().lower()
+    name = UNIT_ALIASES.get(name, name)
+    return name if name in LENGTH_UNITS else None
 
 
 @dataclass(frozen=True, eq=False)
@@ -34,12 +51,17 @@ class Frame:
         input and written back unchanged.
     qform : (4, 4) ndarray or None
         NIfTI's qform where it differs from `affine`; None means the same.
+    unit : str or None
+        The length unit of world coordinates, as OME-Zarr names it (``"millimeter"``,
+        ``"micrometer"``, ``"meter"``, ...; `LENGTH_UNITS`), from the input's header;
+        None when the input does not say (raw files, .npy).
     """
 
     affine: NDArray[np.float64]
     sform_code: int = 2
     qform_code: int = 0
     qform: NDArray[np.float64] | None = None
+    unit: str | None = None
 
     def __post_init__(self):
         affine = np.array(self.affine, dtype=np.float64)
@@ -55,11 +77,18 @@ class Frame:
                 raise ValueError(f"`{name}` must be a NIfTI xform code 0..5, got "
                                  f"{getattr(self, name)}")
             object.__setattr__(self, name, int(getattr(self, name)))
+        if self.unit is not None and self.unit not in LENGTH_UNITS:
+            raise ValueError(f"`unit` must be one of {', '.join(LENGTH_UNITS)} or None, got "
+                             f"{self.unit!r}")
 
     @classmethod
-    def from_spacing(cls, spacing) -> Frame:
+    def from_spacing(cls, spacing, unit: str | None = None) -> Frame:
         """The axis-aligned frame of a format that stores only voxel sizes."""
-        return cls(np.diag([*(float(s) for s in spacing), 1.0]))
+        return cls(np.diag([*(float(s) for s in spacing), 1.0]), unit=unit)
+
+    def with_unit(self, unit: str | None) -> Frame:
+        """This frame with the world's length `unit`."""
+        return Frame(self.affine, self.sform_code, self.qform_code, self.qform, unit)
 
     @property
     def spacing(self) -> tuple:

@@ -22,13 +22,25 @@ _NRRD_NAMES = {code: name for name, code in NRRD_TYPES.items()
 atomic_path = temporary_beside
 
 
-def _nifti(path: Path, data, frame: Frame, compressed: bool):
+#: NIfTI's names of the length units it has (others are written as 'unknown').
+_NIFTI_UNITS = {"meter": "meter", "millimeter": "mm", "micrometer": "micron"}
+
+
+def _nifti(path: Path, data, frame: Frame, compressed: bool, labels: bool, description):
     import nibabel
 
     image = nibabel.Nifti1Image(data, frame.affine)
-    image.header.set_sform(frame.affine, frame.sform_code)
-    image.header.set_qform(frame.affine if frame.qform is None else frame.qform, frame.qform_code)
-    image.header.set_xyzt_units("mm")
+    header = image.header
+    header.set_sform(frame.affine, frame.sform_code)
+    header.set_qform(frame.affine if frame.qform is None else frame.qform, frame.qform_code)
+    header.set_xyzt_units(_NIFTI_UNITS.get(frame.unit, "unknown"))
+    if labels:                  # a label map: viewers pick a lookup table, not a grey ramp
+        header.set_intent("label")
+    finite = data[np.isfinite(data)] if data.dtype.kind == "f" else data
+    if finite.size:             # the display range: 0..k for labels, the values' range
+        header["cal_min"], header["cal_max"] = (0 if labels else finite.min()), finite.max()
+    if description:
+        header["descrip"] = description.encode("ascii", "replace")[:79]
     # nibabel picks gzip from the name: write under a .nii(.gz) name, then move.
     named = path.with_name(path.name + (".nii.gz" if compressed else ".nii"))
     try:
@@ -38,6 +50,10 @@ def _nifti(path: Path, data, frame: Frame, compressed: bool):
         named.unlink(missing_ok=True)
 
 
+#: NRRD's usual spellings (3D Slicer writes "mm"); others by their full name.
+_NRRD_UNITS = {"millimeter": "mm", "micrometer": "um", "nanometer": "nm", "meter": "m"}
+
+
 def _nrrd(path: Path, data, frame: Frame):
     code = data.dtype.str[1:]
     if code not in _NRRD_NAMES:
@@ -45,10 +61,12 @@ def _nrrd(path: Path, data, frame: Frame):
     columns = frame.affine[:3, :3].T
     directions = " ".join("(" + ",".join(f"{v:.17g}" for v in c) + ")" for c in columns)
     origin = "(" + ",".join(f"{v:.17g}" for v in frame.affine[:3, 3]) + ")"
+    quoted = f'"{_NRRD_UNITS.get(frame.unit, frame.unit)}"'
+    units = f"space units: {quoted} {quoted} {quoted}\n" if frame.unit else ""
     header = (
         f"NRRD0005\ntype: {_NRRD_NAMES[code]}\ndimension: 3\n"
         f"space: right-anterior-superior\nsizes: {' '.join(map(str, data.shape))}\n"
-        f"space directions: {directions}\nspace origin: {origin}\n"
+        f"space directions: {directions}\nspace origin: {origin}\n{units}"
         f"endian: little\nencoding: raw\n\n"
     )
     with open(path, "wb") as handle:
@@ -57,7 +75,8 @@ def _nrrd(path: Path, data, frame: Frame):
             data.dtype.newbyteorder("<")).tobytes())
 
 
-def write_volume(path, data, *, spacing=(1.0, 1.0, 1.0), frame: Frame | None = None) -> Path:
+def write_volume(path, data, *, spacing=(1.0, 1.0, 1.0), frame: Frame | None = None,
+                 labels: bool = False, description: str | None = None) -> Path:
     """Write a label or curvature volume, atomically (temporary file, then rename).
 
     Parameters
@@ -72,7 +91,11 @@ def write_volume(path, data, *, spacing=(1.0, 1.0, 1.0), frame: Frame | None = N
         Voxel sizes, for an axis-aligned frame when `frame` is not given.
     frame : Frame, optional
         The voxel-to-world frame, normally the input's (``volume.frame``): NIfTI
-        outputs get its affine, qform and codes unchanged.
+        outputs get its affine, qform, codes and length unit unchanged.
+    labels : bool
+        `data` is a label map: NIfTI's label intent and display range 0..k.
+    description : str, optional
+        NIfTI's ``descrip`` (79 ASCII characters at most: the rest is cut).
     """
     path = Path(path)
     data = np.asarray(data)
@@ -85,7 +108,8 @@ def write_volume(path, data, *, spacing=(1.0, 1.0, 1.0), frame: Frame | None = N
     tmp = atomic_path(path)
     try:
         if name.endswith((".nii", ".nii.gz")):
-            _nifti(tmp, data, frame, compressed=name.endswith(".gz"))
+            _nifti(tmp, data, frame, compressed=name.endswith(".gz"), labels=labels,
+                   description=description)
         elif name.endswith(".npy"):
             with open(tmp, "wb") as handle:
                 np.save(handle, data)

@@ -39,7 +39,8 @@ def write_result_files(paths: dict, result, values, info: dict, *, frame: Frame 
              result.threshold)
     # The writers run at once (zlib releases the GIL).
     with ThreadPoolExecutor(3) as pool:
-        jobs = [pool.submit(_write_array, Path(paths[key]), arrays[kind], frame)
+        jobs = [pool.submit(_write_array, Path(paths[key]), arrays[kind], frame, kind,
+                            _description(kind, result))
                 for kind, keys in _ARRAY_KEYS.items() for key in keys
                 if key in paths and not Path(paths[key]).exists()]
         jobs.append(pool.submit(write_preview, paths["preview"], values, result.curvature,
@@ -53,12 +54,24 @@ def write_result_files(paths: dict, result, values, info: dict, *, frame: Frame 
     Path(paths["summary"]).write_text(_json.dumps(info, indent=2))
 
 
-def _write_array(path: Path, make, frame):
+def _write_array(path: Path, make, frame, kind: str, description: str):
     array = make()
     if path.name.endswith(".zarr"):
         write_zarr(path, array, frame=frame)
     else:
-        write_volume(path, np.asarray(array), frame=frame)
+        write_volume(path, np.asarray(array), frame=frame, labels=kind == "labels",
+                     description=description)
+
+
+def _description(kind: str, result) -> str:
+    """A NIfTI ``descrip`` naming the run (79 characters at most)."""
+    from .._version import __version__
+
+    operator = result.operator.replace("_", "-")
+    if kind == "labels":
+        return (f"volseg {__version__} labels 1..{int(result.n_regions)} ({operator} "
+                f"curvature, {result.measure} cut), 0 outside")
+    return f"volseg {__version__} {operator} mean curvature"
 
 
 def write_segmentation(outputs: OutputSet, result, values, info: dict, *, frame: Frame | None,
