@@ -20,7 +20,7 @@ from volseg.io import OutputSet, VolumeFileError
 
 ROTATED = np.array([[0.0, -2.0, 0.0, 10.0], [1.5, 0.0, 0.0, -3.0], [0.0, 0.0, -4.0, 7.0],
                     [0.0, 0.0, 0.0, 1.0]])
-KINDS = ("labels.nii.gz", "curvature.nii.gz", "summary.json", "preview.png")
+KINDS = ("labels.nii.gz", "curvature.nii.gz", "summary.json", "preview.png", "volumes.vti")
 
 
 def _blob(shape=(12, 10, 8)):

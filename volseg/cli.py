@@ -86,6 +86,9 @@ def _add_segment(sub):
                      f"Default: {AUTO_INTEGER_SIGMA:g} for integer data of up to 16 bits (their "
                      "quantization steps are voxel-sized curvature noise), 0 for floats. "
                      "Larger: fewer, rounder regions; features under about 2 SIGMA vanish")
+    seg.add_argument("--vti", action=argparse.BooleanOptionalAction, default=None,
+                     help="also write <name>_volumes.vti, the input, curvature and labels "
+                     "for ParaView (default: up to 256^3 voxels)")
     seg.add_argument("--plot-persistence", action="store_true",
                      help="also write <name>_persistence.png, the persistence curve alone")
     seg.add_argument("--chunks", type=int, metavar="N",
@@ -276,7 +279,7 @@ def _cmd_segment(args):
         volumes = [chunked(v, args.chunks) for v in volumes]
     summaries = segment_files(
         volumes, out_dir, force=args.force, wait=args.wait,
-        persistence_plot=args.plot_persistence, engine=engine, say=say,
+        persistence_plot=args.plot_persistence, paraview=args.vti, engine=engine, say=say,
         operator=normalize_operator(args.operator), n_regions=args.regions,
         min_persistence=args.min_persistence, value_scale=args.value_scale, noise=args.noise,
         seed=args.seed, mask=mask, smooth_sigma=args.smooth_sigma, measure=args.measure,

@@ -147,7 +147,8 @@ def _refuse_noise_when_lazy(volumes, noise):
         raise UsageError("--noise needs the volume in memory; drop --chunks")
 
 
-def output_sets(volumes, out_dir, *, force=False, wait=False, persistence_plot=False) -> list:
+def output_sets(volumes, out_dir, *, force=False, wait=False, persistence_plot=False,
+                paraview=None) -> list:
     """One `OutputSet` per volume (not yet entered); two inputs with one stem are
     refused before anything is computed."""
     seen = {}
@@ -158,12 +159,12 @@ def output_sets(volumes, out_dir, *, force=False, wait=False, persistence_plot=F
                 f"{Path(out_dir) / volume.name}_*; segment them into different folders")
         seen[volume.name] = volume.path or volume.name
     return [OutputSet(out_dir, v.name, output_names(v.name, persistence_plot, _is_lazy(v),
-                                                    int(np.prod(v.shape))),
+                                                    int(np.prod(v.shape)), paraview),
                       force=force, wait=wait) for v in volumes]
 
 
 def segment_files(volumes, out_dir, *, force=False, wait=False, persistence_plot=False,
-                  engine=None, say=_quiet, **options) -> list[dict]:
+                  paraview=None, engine=None, say=_quiet, **options) -> list[dict]:
     """Lock and check every output set, then segment and write each volume.
 
     Parameters
@@ -174,6 +175,9 @@ def segment_files(volumes, out_dir, *, force=False, wait=False, persistence_plot
     force, wait, persistence_plot
         Overwrite existing sets; wait for another writer's lock; also write the
         persistence curve alone.
+    paraview : bool, optional
+        Write the ParaView image ``<name>_volumes.vti`` (True), or not (False);
+        default: up to `volseg.outputs.PARAVIEW_VOXELS` voxels.
     engine : volseg.blockwise.engine.Engine, optional
         Entered here, after the sets are locked, when a volume is lazy.
     **options
@@ -187,7 +191,7 @@ def segment_files(volumes, out_dir, *, force=False, wait=False, persistence_plot
     _refuse_noise_when_lazy(volumes, options.get("noise"))
     out_dir = check_out_dir(out_dir)
     sets = output_sets(volumes, out_dir, force=force, wait=wait,
-                       persistence_plot=persistence_plot)
+                       persistence_plot=persistence_plot, paraview=paraview)
     summaries = []
     with ExitStack() as stack:
         for outputs in sets:

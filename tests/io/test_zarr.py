@@ -117,10 +117,15 @@ def test_cli_blockwise_writes_no_nifti_above_its_size_limit(tmp_path, volume, mo
     import volseg.outputs._summary as names
 
     monkeypatch.setattr(names, "BLOCKWISE_NIFTI_VOXELS", volume.size - 1)
+    monkeypatch.setattr(names, "PARAVIEW_VOXELS", volume.size - 1)
     write_zarr(tmp_path / "vol.zarr", volume, chunks=(10, 9, 7))
     assert main(["segment", str(tmp_path / "vol.zarr"), "-o", str(tmp_path / "z"), "-q"]) == 0
     assert sorted(os.listdir(tmp_path / "z")) == [
         "vol_curvature.zarr", "vol_labels.zarr", "vol_preview.png", "vol_summary.json"]
+    # The ParaView image on request, above its size too.
+    assert main(["segment", str(tmp_path / "vol.zarr"), "-o", str(tmp_path / "v"), "-q",
+                 "--vti"]) == 0
+    assert "vol_volumes.vti" in os.listdir(tmp_path / "v")
 
 
 @pytest.mark.parametrize("source", ["npy", "zarr"])
@@ -219,7 +224,7 @@ def test_cli_blockwise_checks_the_free_disk_first(tmp_path, volume, capsys, monk
     assert "warning" in err and "GB free; the run may need up to" in err   # outputs may not fit
     assert sorted(p for p in os.listdir(out) if not p.startswith(".")) == [
         "vol_curvature.nii.gz", "vol_curvature.zarr", "vol_labels.nii.gz", "vol_labels.zarr",
-        "vol_preview.png", "vol_summary.json"]
+        "vol_preview.png", "vol_summary.json", "vol_volumes.vti"]
 
 
 # ---------------------------------------------------------------- hostile stores (issue 27)

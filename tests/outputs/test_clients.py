@@ -64,3 +64,44 @@ def test_nifti_outputs_in_simpleitk(run):
     array = sitk.GetArrayFromImage(labels)                    # (z, y, x)
     np.testing.assert_array_equal(array.transpose(2, 1, 0),
                                   np.asarray(nibabel.load(run / "cell_labels.nii.gz").dataobj))
+
+
+def _vti(path):
+    vtk = pytest.importorskip("vtk")
+    from vtk.util.numpy_support import vtk_to_numpy
+
+    reader = vtk.vtkXMLImageDataReader()
+    reader.SetFileName(str(path))
+    reader.Update()
+    image = reader.GetOutput()
+    shape = image.GetDimensions()
+    arrays = {}
+    for i in range(image.GetPointData().GetNumberOfArrays()):
+        array = image.GetPointData().GetArray(i)
+        arrays[array.GetName()] = vtk_to_numpy(array).reshape(shape[::-1]).transpose(2, 1, 0)
+    return image, arrays
+
+
+def test_paraview_image_opens_aligned_in_vtks_reader(run):
+    """VTK's XML image reader (ParaView's) sees the input, curvature and labels, on the
+    input's grid: index -> world equals the NIfTI affine (rotation included)."""
+    image, arrays = _vti(run / "cell_volumes.vti")
+    assert sorted(arrays) == ["curvature", "labels", "values"]
+    np.testing.assert_array_equal(arrays["values"], _blobs())
+    np.testing.assert_array_equal(arrays["labels"],
+                                  np.asarray(nibabel.load(run / "cell_labels.nii.gz").dataobj))
+    np.testing.assert_array_equal(
+        arrays["curvature"], np.asarray(nibabel.load(run / "cell_curvature.nii.gz").dataobj))
+    for index in [(0, 0, 0), (19, 0, 0), (3, 17, 11), (19, 17, 15)]:
+        world = [0.0] * 3
+        image.TransformIndexToPhysicalPoint(*index, world)
+        np.testing.assert_allclose(world, (ROTATED_UM @ [*index, 1])[:3], atol=1e-12)
+
+
+def test_blockwise_writes_the_same_paraview_image(run, tmp_path):
+    assert main(["segment", str(run.parent / "cell.nii.gz"), "-o", str(tmp_path), "-q",
+                 "--regions", "3", "--chunks", "7"]) == 0
+    _, blockwise = _vti(tmp_path / "cell_volumes.vti")
+    _, memory = _vti(run / "cell_volumes.vti")
+    for name in memory:
+        np.testing.assert_array_equal(blockwise[name], memory[name])

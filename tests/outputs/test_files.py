@@ -11,6 +11,7 @@ from volseg import segment_volume
 from volseg.io import Frame, write_zarr
 from volseg.outputs import (
     BLOCKWISE_NIFTI_VOXELS,
+    PARAVIEW_VOXELS,
     output_names,
     result_title,
     summary,
@@ -20,7 +21,11 @@ from volseg.outputs import (
 
 def test_output_names_of_each_path():
     assert output_names("s") == {"labels": "s_labels.nii.gz", "curvature": "s_curvature.nii.gz",
-                                 "summary": "s_summary.json", "preview": "s_preview.png"}
+                                 "summary": "s_summary.json", "preview": "s_preview.png",
+                                 "paraview": "s_volumes.vti"}
+    assert "paraview" not in output_names("s", voxels=PARAVIEW_VOXELS + 1)
+    assert "paraview" not in output_names("s", paraview=False)
+    assert "paraview" in output_names("s", voxels=PARAVIEW_VOXELS + 1, paraview=True)
     big = output_names("s", blockwise=True, voxels=BLOCKWISE_NIFTI_VOXELS + 1)
     assert big["labels"] == "s_labels.zarr" and big["curvature"] == "s_curvature.zarr"
     assert "labels_nifti" not in big

@@ -4,16 +4,18 @@ input's frame, and the all-or-nothing writer of a result's output files.
 - `read_volume` -> `Volume` (array [x, y, z] + `Frame`); `VolumeFileError` for
   every malformed input;
 - `write_volume` (NIfTI, NRRD, .npy, raw), atomically; `read_zarr` / `write_zarr`
-  for volumes larger than memory (lazy, block by block);
+  for volumes larger than memory (lazy, block by block); `write_vti` (ParaView's
+  own image format, several volumes in one file, streamed);
 - `OutputSet`: lock, check, stage and commit the files of one result.
 """
 
 from .output_set import FolderLock, OutputError, OutputSet, recover
 from .readers import DTYPES, read_volume
 from .volume import Frame, Volume, VolumeFileError
+from .vtk_image import write_vti
 from .writers import atomic_path, write_volume
 from .zarr_store import read_zarr, write_zarr
 
 __all__ = ["Volume", "Frame", "VolumeFileError", "read_volume", "write_volume", "atomic_path",
            "OutputSet", "OutputError", "FolderLock", "recover", "DTYPES", "read_zarr",
-           "write_zarr"]
+           "write_zarr", "write_vti"]

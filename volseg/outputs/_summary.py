@@ -1,8 +1,9 @@
 """The names of a segmentation's files, its summary and its title.
 
 ``<stem>_labels.nii.gz`` and ``<stem>_curvature.nii.gz`` carry the input's
-voxel-to-world frame (affine and NIfTI codes); ``<stem>_summary.json`` is strict
-JSON (non-finite numbers are null); ``<stem>_preview.png`` shows mid slices.
+voxel-to-world frame (affine and NIfTI codes); ``<stem>_volumes.vti`` holds the input,
+curvature and labels for ParaView; ``<stem>_summary.json`` is strict JSON (non-finite
+numbers are null); ``<stem>_preview.png`` shows mid slices.
 """
 
 from __future__ import annotations
@@ -15,7 +16,8 @@ import numpy as np
 from .._version import __version__
 from ..io import Frame
 
-__all__ = ["OUTPUT_SUFFIXES", "BLOCKWISE_NIFTI_VOXELS", "output_names", "files_sha256", "summary",
+__all__ = ["OUTPUT_SUFFIXES", "BLOCKWISE_NIFTI_VOXELS", "PARAVIEW_SUFFIX", "PARAVIEW_VOXELS",
+           "output_names", "files_sha256", "summary",
            "result_summary", "input_summary", "result_title", "degenerate_cut_warning"]
 
 OUTPUT_SUFFIXES = {"labels": "_labels.nii.gz", "curvature": "_curvature.nii.gz",
@@ -30,13 +32,23 @@ BLOCKWISE_SUFFIXES = {"labels": "_labels.zarr", "curvature": "_curvature.zarr"}
 BLOCKWISE_NIFTI_VOXELS = 256**3
 
 
+#: The input, curvature and labels in one VTK image for ParaView (`volseg.io.write_vti`).
+PARAVIEW_SUFFIX = "_volumes.vti"
+#: Up to this many voxels every run writes the ParaView image (about 9 bytes per voxel
+#: for 8-bit input: 150 MB at 256^3); above it only on request (``--vti``).
+PARAVIEW_VOXELS = 256**3
+
+
 def output_names(stem: str, persistence_plot: bool = False, blockwise: bool = False,
-                 voxels: int | None = None) -> dict:
+                 voxels: int | None = None, paraview: bool | None = None) -> dict:
     """Kind -> file name of the outputs of `stem` (with ``<stem>_persistence.png``
     when `persistence_plot`; labels and curvature as ``.zarr`` when `blockwise`, and
     also as NIfTI when the volume's `voxels` are given and at most
-    `BLOCKWISE_NIFTI_VOXELS`)."""
+    `BLOCKWISE_NIFTI_VOXELS`; the ParaView image ``<stem>_volumes.vti`` when
+    `paraview`, or by default when `voxels` are unknown or at most `PARAVIEW_VOXELS`)."""
     names = {kind: stem + suffix for kind, suffix in OUTPUT_SUFFIXES.items()}
+    if paraview or (paraview is None and (voxels is None or voxels <= PARAVIEW_VOXELS)):
+        names["paraview"] = stem + PARAVIEW_SUFFIX
     if blockwise:
         if voxels is not None and voxels <= BLOCKWISE_NIFTI_VOXELS:
             names.update({f"{kind}_nifti": stem + OUTPUT_SUFFIXES[kind]

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import _json
-from ..io import Frame, OutputSet, write_volume, write_zarr
+from ..io import Frame, OutputSet, write_volume, write_vti, write_zarr
 
 __all__ = ["write_result_files", "write_segmentation"]
 
@@ -21,7 +21,8 @@ def write_result_files(paths: dict, result, values, info: dict, *, frame: Frame 
                        title: str, value_range=None) -> None:
     """Write `result`'s files into `paths` (an output set's staging paths): labels and
     curvature (NIfTI, or Zarr for ``.zarr`` paths; a path already written by the
-    blockwise path's storage is kept), preview, persistence plot, summary `info`.
+    blockwise path's storage is kept), the ParaView image of the input, curvature and
+    labels (streamed: lazy arrays stay lazy), preview, persistence plot, summary `info`.
 
     `values` is the volume that was segmented (for the preview) and `value_range` its
     (min, max), when known. Labels are written in the smallest unsigned type that
@@ -46,6 +47,10 @@ def write_result_files(paths: dict, result, values, info: dict, *, frame: Frame 
         jobs.append(pool.submit(write_preview, paths["preview"], values, result.curvature,
                                 result.labels, title=title, persistence=curve,
                                 value_range=value_range, n_labels=k, measure=result.measure))
+        if "paraview" in paths:
+            jobs.append(pool.submit(write_vti, paths["paraview"],
+                                    {"labels": arrays["labels"](), "curvature":
+                                     arrays["curvature"](), "values": values}, frame))
         if "persistence" in paths:
             jobs.append(pool.submit(write_persistence_plot, paths["persistence"], *curve, k,
                                     measure=result.measure))
