@@ -487,7 +487,7 @@ def _quiet_readers():
     logger.setLevel(logging.CRITICAL)
     try:
         with warnings.catch_warnings():
-            for module in ("nibabel", "zarr", "numcodecs"):
+            for module in ("nibabel", "zarr", "numcodecs", "ome_zarr"):
                 warnings.filterwarnings("ignore", module=module + r"(\..*)?")
             yield
     finally:

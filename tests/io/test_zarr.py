@@ -121,7 +121,8 @@ def test_cli_blockwise_writes_no_nifti_above_its_size_limit(tmp_path, volume, mo
     write_zarr(tmp_path / "vol.zarr", volume, chunks=(10, 9, 7))
     assert main(["segment", str(tmp_path / "vol.zarr"), "-o", str(tmp_path / "z"), "-q"]) == 0
     assert sorted(os.listdir(tmp_path / "z")) == [
-        "vol_curvature.zarr", "vol_labels.zarr", "vol_preview.png", "vol_summary.json"]
+        "vol_curvature.zarr", "vol_labels.zarr", "vol_preview.png", "vol_segmentation.ome.zarr",
+        "vol_summary.json"]
     # The ParaView image on request, above its size too.
     assert main(["segment", str(tmp_path / "vol.zarr"), "-o", str(tmp_path / "v"), "-q",
                  "--vti"]) == 0
@@ -223,8 +224,9 @@ def test_cli_blockwise_checks_the_free_disk_first(tmp_path, volume, capsys, monk
     err = capsys.readouterr().err
     assert "warning" in err and "GB free; the run may need up to" in err   # outputs may not fit
     assert sorted(p for p in os.listdir(out) if not p.startswith(".")) == [
-        "vol_curvature.nii.gz", "vol_curvature.zarr", "vol_labels.nii.gz", "vol_labels.zarr",
-        "vol_preview.png", "vol_summary.json", "vol_volumes.vti"]
+        "vol_curvature.nii.gz", "vol_curvature.zarr", "vol_labels.nii.gz",
+        "vol_labels.zarr", "vol_preview.png", "vol_segmentation.ome.zarr", "vol_summary.json",
+        "vol_volumes.vti"]
 
 
 # ---------------------------------------------------------------- hostile stores (issue 27)

@@ -105,3 +105,53 @@ def test_blockwise_writes_the_same_paraview_image(run, tmp_path):
     _, memory = _vti(run / "cell_volumes.vti")
     for name in memory:
         np.testing.assert_array_equal(blockwise[name], memory[name])
+
+
+def _ngff_nodes(path):
+    from ome_zarr.io import parse_url
+    from ome_zarr.reader import Reader
+
+    return {node.metadata.get("name") or "": node for node in Reader(parse_url(str(path)))()}
+
+
+def test_ome_zarr_opens_as_an_image_with_its_labels_in_ome_zarr_py(run):
+    """ome-zarr-py's reader (napari-ome-zarr's): the curvature image and its labels
+    image, axes z, y, x, the input's voxel sizes, origin and micrometres (NGFF has no
+    rotation: the frame is written axis aligned)."""
+    nodes = _ngff_nodes(run / "cell_segmentation.ome.zarr")
+    image, labels = nodes["curvature"], nodes["regions"]
+    assert [type(s).__name__ for s in labels.specs] == ["Label", "Multiscales"]
+    for node in (image, labels):
+        assert [a["name"] for a in node.metadata["axes"]] == ["z", "y", "x"]
+        assert {a["unit"] for a in node.metadata["axes"]} == {"micrometer"}
+        scale, translation = node.metadata["coordinateTransformations"][0]
+        np.testing.assert_allclose(scale["scale"], [0.8, 0.5, 0.4])
+        np.testing.assert_allclose(translation["translation"], [7.25, -3.5, 12.0])
+    nifti = np.asarray(nibabel.load(run / "cell_labels.nii.gz").dataobj)
+    np.testing.assert_array_equal(np.asarray(labels.data[0]), nifti.transpose(2, 1, 0))
+    curvature = np.asarray(nibabel.load(run / "cell_curvature.nii.gz").dataobj)
+    np.testing.assert_array_equal(np.asarray(image.data[0]), curvature.transpose(2, 1, 0))
+
+
+def test_ngff_pyramids_sample_labels_and_average_curvature(tmp_path):
+    """Labels are sampled (every second voxel, the same first centre), the curvature
+    averaged over 2 x 2 x 2 (its centre half a voxel on): levels down to 64 voxels."""
+    from volseg.io import Frame, write_ngff
+
+    rng = np.random.default_rng(1)
+    labels = rng.integers(0, 7, (150, 140, 130)).astype(np.uint8)
+    curvature = rng.normal(size=labels.shape)
+    write_ngff(tmp_path / "p.ome.zarr", labels, curvature,
+               Frame.from_spacing((1.0, 2.0, 3.0), unit="millimeter"))
+    nodes = _ngff_nodes(tmp_path / "p.ome.zarr")
+    regions, image = nodes["regions"], nodes["curvature"]
+    assert [d.shape for d in regions.data] == [(130, 140, 150), (65, 70, 75), (33, 35, 38)]
+    zyx = labels.transpose(2, 1, 0)
+    np.testing.assert_array_equal(np.asarray(regions.data[1]), zyx[::2, ::2, ::2])
+    mean = curvature.transpose(2, 1, 0)[:130, :140, :150].reshape(65, 2, 70, 2, 75, 2)
+    np.testing.assert_allclose(np.asarray(image.data[1]), mean.mean(axis=(1, 3, 5)),
+                               atol=1e-6)
+    for node, shift in ((regions, 0.0), (image, 0.5)):
+        scale, translation = node.metadata["coordinateTransformations"][1]
+        np.testing.assert_allclose(scale["scale"], [6.0, 4.0, 2.0])
+        np.testing.assert_allclose(translation["translation"], np.array([3.0, 2.0, 1.0]) * shift)

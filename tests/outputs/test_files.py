@@ -22,7 +22,7 @@ from volseg.outputs import (
 def test_output_names_of_each_path():
     assert output_names("s") == {"labels": "s_labels.nii.gz", "curvature": "s_curvature.nii.gz",
                                  "summary": "s_summary.json", "preview": "s_preview.png",
-                                 "paraview": "s_volumes.vti"}
+                                 "paraview": "s_volumes.vti", "ngff": "s_segmentation.ome.zarr"}
     assert "paraview" not in output_names("s", voxels=PARAVIEW_VOXELS + 1)
     assert "paraview" not in output_names("s", paraview=False)
     assert "paraview" in output_names("s", voxels=PARAVIEW_VOXELS + 1, paraview=True)

@@ -5,10 +5,12 @@ input's frame, and the all-or-nothing writer of a result's output files.
   every malformed input;
 - `write_volume` (NIfTI, NRRD, .npy, raw), atomically; `read_zarr` / `write_zarr`
   for volumes larger than memory (lazy, block by block); `write_vti` (ParaView's
-  own image format, several volumes in one file, streamed);
+  own image format, several volumes in one file, streamed); `write_ngff` (an OME-Zarr
+  image with its labels and pyramids, for napari and neuroglancer);
 - `OutputSet`: lock, check, stage and commit the files of one result.
 """
 
+from .ngff import write_ngff
 from .output_set import FolderLock, OutputError, OutputSet, recover
 from .readers import DTYPES, read_volume
 from .volume import Frame, Volume, VolumeFileError
@@ -18,4 +20,4 @@ from .zarr_store import read_zarr, write_zarr
 
 __all__ = ["Volume", "Frame", "VolumeFileError", "read_volume", "write_volume", "atomic_path",
            "OutputSet", "OutputError", "FolderLock", "recover", "DTYPES", "read_zarr",
-           "write_zarr", "write_vti"]
+           "write_zarr", "write_vti", "write_ngff"]

@@ -12,6 +12,7 @@ from ._summary import (
     BLOCKWISE_NIFTI_VOXELS,
     BLOCKWISE_SUFFIXES,
     LISTED_PERSISTENCES,
+    NGFF_SUFFIX,
     OUTPUT_SUFFIXES,
     PARAVIEW_SUFFIX,
     PARAVIEW_VOXELS,
@@ -27,7 +28,7 @@ from ._summary import (
 from ._write import write_result_files, write_segmentation
 
 __all__ = ["OUTPUT_SUFFIXES", "BLOCKWISE_SUFFIXES", "BLOCKWISE_NIFTI_VOXELS", "PARAVIEW_SUFFIX",
-           "PARAVIEW_VOXELS",
+           "NGFF_SUFFIX", "PARAVIEW_VOXELS",
            "LISTED_PERSISTENCES", "output_names", "files_sha256", "input_files", "summary",
            "result_summary", "input_summary", "result_title", "degenerate_cut_warning",
            "write_result_files",

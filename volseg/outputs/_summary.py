@@ -17,7 +17,7 @@ from .._version import __version__
 from ..io import Frame
 
 __all__ = ["OUTPUT_SUFFIXES", "BLOCKWISE_NIFTI_VOXELS", "PARAVIEW_SUFFIX", "PARAVIEW_VOXELS",
-           "output_names", "files_sha256", "summary",
+           "NGFF_SUFFIX", "output_names", "files_sha256", "summary",
            "result_summary", "input_summary", "result_title", "degenerate_cut_warning"]
 
 OUTPUT_SUFFIXES = {"labels": "_labels.nii.gz", "curvature": "_curvature.nii.gz",
@@ -32,6 +32,9 @@ BLOCKWISE_SUFFIXES = {"labels": "_labels.zarr", "curvature": "_curvature.zarr"}
 BLOCKWISE_NIFTI_VOXELS = 256**3
 
 
+#: Curvature and labels as an OME-Zarr image with its labels, for napari, neuroglancer
+#: and every NGFF viewer (`volseg.io.write_ngff`).
+NGFF_SUFFIX = "_segmentation.ome.zarr"
 #: The input, curvature and labels in one VTK image for ParaView (`volseg.io.write_vti`).
 PARAVIEW_SUFFIX = "_volumes.vti"
 #: Up to this many voxels every run writes the ParaView image (about 9 bytes per voxel
@@ -44,9 +47,11 @@ def output_names(stem: str, persistence_plot: bool = False, blockwise: bool = Fa
     """Kind -> file name of the outputs of `stem` (with ``<stem>_persistence.png``
     when `persistence_plot`; labels and curvature as ``.zarr`` when `blockwise`, and
     also as NIfTI when the volume's `voxels` are given and at most
-    `BLOCKWISE_NIFTI_VOXELS`; the ParaView image ``<stem>_volumes.vti`` when
-    `paraview`, or by default when `voxels` are unknown or at most `PARAVIEW_VOXELS`)."""
+    `BLOCKWISE_NIFTI_VOXELS`; the OME-Zarr image ``<stem>_segmentation.ome.zarr``; the ParaView
+    image ``<stem>_volumes.vti`` when `paraview`, or by default when `voxels` are
+    unknown or at most `PARAVIEW_VOXELS`)."""
     names = {kind: stem + suffix for kind, suffix in OUTPUT_SUFFIXES.items()}
+    names["ngff"] = stem + NGFF_SUFFIX
     if paraview or (paraview is None and (voxels is None or voxels <= PARAVIEW_VOXELS)):
         names["paraview"] = stem + PARAVIEW_SUFFIX
     if blockwise:

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import _json
-from ..io import Frame, OutputSet, write_volume, write_vti, write_zarr
+from ..io import Frame, OutputSet, write_ngff, write_volume, write_vti, write_zarr
 
 __all__ = ["write_result_files", "write_segmentation"]
 
@@ -47,6 +47,9 @@ def write_result_files(paths: dict, result, values, info: dict, *, frame: Frame 
         jobs.append(pool.submit(write_preview, paths["preview"], values, result.curvature,
                                 result.labels, title=title, persistence=curve,
                                 value_range=value_range, n_labels=k, measure=result.measure))
+        if "ngff" in paths:
+            jobs.append(pool.submit(write_ngff, paths["ngff"], arrays["labels"](),
+                                    result.curvature, frame))
         if "paraview" in paths:
             jobs.append(pool.submit(write_vti, paths["paraview"],
                                     {"labels": arrays["labels"](), "curvature":

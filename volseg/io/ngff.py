@@ -1,0 +1,94 @@
+"""`write_ngff`: a result as an OME-Zarr (NGFF 0.5) image, for napari, neuroglancer and
+every NGFF viewer: the curvature as a multiscale image, the labels as its NGFF labels
+image ``labels/regions``, axes z, y, x, the input's voxel sizes, origin and unit.
+
+The metadata and the arrays are written by ome-zarr-py (the NGFF reference
+implementation, which napari-ome-zarr reads with), from pyramids made here lazily:
+labels by nearest sampling (every second voxel: labels are never blended, and the
+level's voxel centres stay on level 0's), the curvature by 2 x 2 x 2 means (its
+translation moved half a voxel, as NGFF wants). A Dask input is never whole in memory:
+each level is written block by block from the one above.
+
+NGFF 0.5 has scale and translation only: a rotated or flipped frame is written axis
+aligned (voxel sizes and the origin); the NIfTI and ``.vti`` outputs keep the rotation.
+"""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from .volume import Frame
+
+__all__ = ["write_ngff", "pyramid_levels", "NGFF_CHUNK"]
+
+#: Chunk edge of every level (64^3: 256 KB of uint8 labels, 1 MB of float32).
+NGFF_CHUNK = 64
+#: Levels are added until the smallest axis is at most this many voxels.
+SMALLEST_LEVEL = 64
+
+
+def pyramid_levels(shape) -> int:
+    """How many levels below level 0: halving until the smallest axis is at most
+    `SMALLEST_LEVEL` voxels (0 for a small volume)."""
+    levels, side = 0, min(shape)
+    while side > SMALLEST_LEVEL and side // 2 >= 2:
+        side //= 2
+        levels += 1
+    return levels
+
+
+def write_ngff(path, labels, curvature, frame: Frame) -> Path:
+    """Write `labels` and `curvature` ((X, Y, Z) numpy or Dask arrays, one shape) as
+    the OME-Zarr image `path` (a new folder; its parent must exist)."""
+    import dask.array as da
+    import zarr
+
+    with warnings.catch_warnings():     # its own deprecated default argument, at import
+        warnings.simplefilter("ignore", DeprecationWarning)
+        from ome_zarr.writer import write_multiscale, write_multiscale_labels
+
+    path = Path(path)
+    if tuple(labels.shape) != tuple(curvature.shape) or len(labels.shape) != 3:
+        raise ValueError(f"`labels` {labels.shape} and `curvature` {curvature.shape} must be "
+                         "3-D volumes of one shape")
+    levels = pyramid_levels(labels.shape)
+    spacing = np.array(frame.spacing)[::-1]            # z, y, x
+    origin = frame.affine[:3, 3][::-1]
+    axes = [{"name": name, "type": "space", **({"unit": frame.unit} if frame.unit else {})}
+            for name in "zyx"]
+
+    def zyx(array):
+        array = array if hasattr(array, "dask") else da.from_array(np.asarray(array),
+                                                                 chunks=NGFF_CHUNK)
+        return array.transpose(2, 1, 0).rechunk(NGFF_CHUNK)
+
+    label_levels, mean_levels = [zyx(labels)], [zyx(curvature).astype(np.float32)]
+    for _ in range(levels):
+        label_levels.append(label_levels[-1][::2, ::2, ::2].rechunk(NGFF_CHUNK))
+        mean_levels.append(da.coarsen(np.mean, mean_levels[-1], {0: 2, 1: 2, 2: 2},
+                                      trim_excess=True).astype(np.float32).rechunk(NGFF_CHUNK))
+    # Level i's voxel size is 2^i of level 0's; nearest sampling keeps level 0's first
+    # voxel centre, a 2^i mean's centre is (2^i - 1) / 2 voxels further.
+    label_transforms = [_transforms(spacing * 2**i, origin) for i in range(levels + 1)]
+    mean_transforms = [_transforms(spacing * 2**i, origin + spacing * (2**i - 1) / 2)
+                       for i in range(levels + 1)]
+    root = zarr.open_group(str(path), mode="w-")
+    with warnings.catch_warnings():
+        # ome-zarr 0.18 deprecates `coordinate_transformations` for `scale`, which has
+        # no translation: without it the labels would not sit on the input's origin.
+        warnings.filterwarnings("ignore", "The 'coordinate_transformations' argument",
+                                DeprecationWarning)
+        write_multiscale(mean_levels, root, name="curvature", axes=axes,
+                         coordinate_transformations=mean_transforms)
+        write_multiscale_labels(label_levels, root, name="regions", axes=axes,
+                                coordinate_transformations=label_transforms,
+                                label_metadata={"source": {"image": "../../"}})
+    return path
+
+
+def _transforms(scale, translation) -> list:
+    return [{"type": "scale", "scale": [float(s) for s in scale]},
+            {"type": "translation", "translation": [float(t) for t in translation]}]
