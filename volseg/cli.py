@@ -131,6 +131,8 @@ def _add_segment_io(seg):
                      "folder, or a Zarr store hold links to files outside it")
     seg.add_argument("--channel", type=int, metavar="C",
                      help="the channel of an OME-Zarr image with several (its 'c' axis)")
+    seg.add_argument("--ome-level", type=int, metavar="L",
+                     help="the resolution level of an OME-Zarr image (default 0, the full one)")
     seg.add_argument("--json", action="store_true", help="print the summaries as JSON on stdout")
     seg.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
 
@@ -197,6 +199,7 @@ def _add_others(sub):
     info.add_argument("--dtype")
     info.add_argument("--allow-external-data", action="store_true")
     info.add_argument("--channel", type=int, metavar="C")
+    info.add_argument("--ome-level", type=int, metavar="L")
 
     compare = sub.add_parser("compare", help="compare two label volumes (Huang-Dom)")
     compare.add_argument("labels_a", metavar="LABELS_A")
@@ -273,7 +276,8 @@ def _cmd_segment(args):
     _check_mask_rule(mask)
     volumes = [load_for_budget(name, engine.memory_limit, shape=args.shape, dtype=args.dtype,
                                allow_external_data=args.allow_external_data,
-                               chunks=args.chunks, channel=args.channel, say=say)
+                               chunks=args.chunks, channel=args.channel,
+                               ome_level=args.ome_level, say=say)
                for name in args.inputs]
     if args.chunks is not None:
         volumes = [chunked(v, args.chunks) for v in volumes]
@@ -380,7 +384,7 @@ def _cmd_info(args):
     from .files import load_volume
 
     volume = load_volume(args.input, args.shape, args.dtype, args.allow_external_data,
-                         channel=args.channel)
+                         channel=args.channel, ome_level=args.ome_level)
     data = volume.data
     frame = volume.frame
     if hasattr(data, "compute"):          # a Zarr store: one pass over its chunks
@@ -392,7 +396,8 @@ def _cmd_info(args):
     affine = "\n".join("    " + " ".join(f"{v:10.4g}" for v in row) for row in frame.affine)
     print(f"{volume.path}\n  shape (x, y, z): {data.shape}\n  dtype: {data.dtype}\n"
           f"  range: {low} .. {high} (mean {mean:.4g})\n"
-          f"  spacing: {volume.spacing}\n  voxel-to-world affine (RAS+, sform code "
+          f"  spacing: {volume.spacing} ({frame.unit or 'unit unknown'})\n"
+          f"  voxel-to-world affine (RAS+, sform code "
           f"{frame.sform_code}, qform code {frame.qform_code}):\n{affine}\n"
           f"  read as: {volume.source}\n  files: {', '.join(map(str, volume.files))}")
     return 0

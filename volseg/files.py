@@ -47,18 +47,20 @@ def _quiet(message):
 
 
 def load_volume(name, shape=None, dtype=None, allow_external_data=False, chunks=None,
-                channel=None):
+                channel=None, ome_level=None):
     """The `Volume` of a volume file or a named dataset (`volseg.datasets.resolve`); lazy
-    (a Dask array of `chunks`) when `chunks` is given; `channel` of an OME-Zarr image."""
+    (a Dask array of `chunks`) when `chunks` is given; `channel` and resolution
+    `ome_level` of an OME-Zarr image."""
     from .datasets import resolve
     from .io import read_volume
 
     return read_volume(resolve(name), shape=shape, dtype=dtype,
-                       allow_external_data=allow_external_data, chunks=chunks, channel=channel)
+                       allow_external_data=allow_external_data, chunks=chunks, channel=channel,
+                       ome_level=ome_level)
 
 
 def load_for_budget(name, budget: int, *, shape=None, dtype=None, allow_external_data=False,
-                    chunks=None, channel=None, say=_quiet):
+                    chunks=None, channel=None, ome_level=None, say=_quiet):
     """`load_volume`, lazily (the blockwise path, `DEFAULT_CHUNKS`) when `chunks` is not
     given but the in-memory path would need more than `budget` bytes
     (`IN_MEMORY_BYTES_PER_VOXEL` per voxel). The file size bounds the voxel count from
@@ -68,7 +70,7 @@ def load_for_budget(name, budget: int, *, shape=None, dtype=None, allow_external
     from .datasets import resolve
 
     options = {"shape": shape, "dtype": dtype, "allow_external_data": allow_external_data,
-               "channel": channel}
+               "channel": channel, "ome_level": ome_level}
     if chunks is not None:
         return load_volume(name, **options, chunks=chunks)
     path = resolve(name)       # a dataset name is verified once, here

@@ -312,3 +312,64 @@ def test_ome_images_with_channel_and_time_axes(tmp_path, capsys):
                  str(tmp_path / "out"), "-q", "--regions", "2"]) == 0
     assert main(["info", str(tmp_path / "o.zarr")]) == 2
     assert "--channel (0 to 2)" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("version", ["0.4", "0.5"])
+def test_ome_zarr_04_and_05_keep_translation_units_and_levels(tmp_path, version, capsys):
+    """Written by ome-zarr-py (NGFF 0.4: Zarr v2, 0.5: v3, its default): c, z, y, x
+    with one channel, micrometres, a translation and a 2-level pyramid. 0.5 was
+    refused and 0.4 lost its translation and unit."""
+    import warnings
+
+    import zarr
+    from ome_zarr.format import FormatV04, FormatV05
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)
+        from ome_zarr.writer import write_multiscale
+
+    from volseg.io import read_volume
+
+    rng = np.random.default_rng(0)
+    zyx = rng.integers(0, 200, (6, 7, 8)).astype(np.uint16)
+    levels = [zyx[None], zyx[None, ::2, ::2, ::2]]
+    fmt = FormatV04() if version == "0.4" else FormatV05()
+    root = zarr.open_group(str(tmp_path / "img.ome.zarr"), mode="w",
+                           zarr_format=2 if version == "0.4" else 3)
+    axes = [{"name": "c", "type": "channel"}] + [
+        {"name": n, "type": "space", "unit": "micrometer"} for n in "zyx"]
+    transforms = [[{"type": "scale", "scale": [1.0, 2.0 * f, 0.5 * f, 0.25 * f]},
+                   {"type": "translation", "translation": [0.0, 10.0, -4.0, 3.0]}]
+                  for f in (1, 2)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)
+        write_multiscale(levels, root, fmt=fmt, axes=axes,
+                         coordinate_transformations=transforms)
+    volume = read_volume(tmp_path / "img.ome.zarr")
+    assert volume.name == "img" and volume.frame.unit == "micrometer"
+    np.testing.assert_array_equal(np.asarray(volume.data), zyx.transpose(2, 1, 0))
+    np.testing.assert_allclose(volume.frame.affine,
+                               [[0.25, 0, 0, 3.0], [0, 0.5, 0, -4.0], [0, 0, 2.0, 10.0],
+                                [0, 0, 0, 1]])
+    coarse = read_volume(tmp_path / "img.ome.zarr", ome_level=1)
+    np.testing.assert_array_equal(np.asarray(coarse.data), zyx[::2, ::2, ::2].transpose(2, 1, 0))
+    assert coarse.spacing == (0.5, 1.0, 4.0)
+    assert main(["segment", str(tmp_path / "img.ome.zarr"), "--ome-level", "2", "-o",
+                 str(tmp_path / "o")]) == 2
+    assert "--ome-level 2 is not one of its 2 levels (0 to 1)" in capsys.readouterr().err
+    assert main(["info", str(tmp_path / "img.ome.zarr")]) == 0
+    assert "(micrometer)" in capsys.readouterr().out
+
+
+def test_volseg_ome_zarr_output_reads_back_as_its_curvature(tmp_path, volume):
+    """The NGFF output is an input like any OME-Zarr image: its level 0 is the
+    curvature, on the input's grid and frame."""
+    from volseg.io import read_volume
+
+    np.save(tmp_path / "v.npy", volume)
+    assert main(["segment", str(tmp_path / "v.npy"), "-o", str(tmp_path / "o"), "-q",
+                 "--regions", "4"]) == 0
+    back = read_volume(tmp_path / "o" / "v_segmentation.ome.zarr")
+    curvature = nibabel.load(tmp_path / "o" / "v_curvature.nii.gz")
+    np.testing.assert_array_equal(np.asarray(back.data), np.asarray(curvature.dataobj))
+    np.testing.assert_allclose(back.frame.affine, curvature.affine)

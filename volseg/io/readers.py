@@ -428,7 +428,8 @@ def compressed_shape(path):
 
 
 def read_volume(path, *, shape=None, dtype=None, byte_order=None,
-                allow_external_data: bool = False, chunks=None, channel=None) -> Volume:
+                allow_external_data: bool = False, chunks=None, channel=None,
+                ome_level=None) -> Volume:
     """Read a volume from a file, by extension.
 
     Parameters
@@ -460,6 +461,8 @@ def read_volume(path, *, shape=None, dtype=None, byte_order=None,
     channel : int, optional
         The channel of an OME-Zarr image with a ``c`` axis of several (required
         then; an image of one channel needs none).
+    ome_level : int, optional
+        The resolution level of an OME-Zarr image (default 0, the full one).
 
     Returns
     -------
@@ -499,9 +502,10 @@ def read_volume(path, *, shape=None, dtype=None, byte_order=None,
 
     if is_zarr(path):
         # lazy: a Dask array over the store's chunks
-        return read_zarr(path, allow_external_data=allow_external_data, channel=channel)
-    if channel is not None:
-        raise ValueError(f"{path}: `channel` applies to OME-Zarr images only")
+        return read_zarr(path, allow_external_data=allow_external_data, channel=channel,
+                         ome_level=ome_level)
+    if channel is not None or ome_level is not None:
+        raise ValueError(f"{path}: `channel` and `ome_level` apply to OME-Zarr images only")
     regular_file_size(path)  # missing, a folder, a device or a pipe: refused before opening
     try:
         data, frame, short, source, files = _reader(path)(

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .volume import Frame, Volume, VolumeFileError
+from .volume import Frame, Volume, VolumeFileError, length_unit
 
 __all__ = ["read_zarr", "write_zarr", "is_zarr"]
 
@@ -33,32 +33,56 @@ def is_zarr(path) -> bool:
         return False
 
 
-def _ome_level0(group, path):
-    multiscales = group.attrs.get("multiscales")
+def _ome_level(group, path, level=None):
+    """(the array, its axis names, voxel sizes, origin and length units per axis) of
+    an OME-Zarr image's level `level` (default 0): NGFF 0.4 (``multiscales`` in the
+    attributes) or 0.5 (under ``ome``), the dataset's scale and translation composed
+    with the multiscale's own."""
+    attrs = group.attrs.asdict()
+    multiscales = attrs.get("multiscales") or (attrs.get("ome") or {}).get("multiscales")
     if not multiscales:
         raise VolumeFileError(f"{path}: a Zarr group without OME-Zarr 'multiscales' metadata; "
                               "give the path of the array inside it")
     try:
         scale = multiscales[0]
-        level = scale["datasets"][0]
-        axes = [a["name"] if isinstance(a, dict) else a for a in scale.get("axes", [])]
-        factors = [1.0] * len(axes)
-        for transform in level.get("coordinateTransformations", []):
-            if transform.get("type") == "scale":
-                factors = [float(f) for f in transform["scale"]]
-        array = group[level["path"]]
+        datasets = scale["datasets"]
+        index = 0 if level is None else int(level)
+        if isinstance(level, bool) or not 0 <= index < len(datasets):
+            raise VolumeFileError(f"{path}: --ome-level {level} is not one of its "
+                                  f"{len(datasets)} levels (0 to {len(datasets) - 1})")
+        axes_meta = scale.get("axes", [])
+        axes = [a["name"] if isinstance(a, dict) else a for a in axes_meta]
+        units = [a.get("unit") if isinstance(a, dict) else None for a in axes_meta]
+        factors, origin = [1.0] * len(axes), [0.0] * len(axes)
+        for transforms in (datasets[index].get("coordinateTransformations", []),
+                           scale.get("coordinateTransformations", [])):
+            for transform in transforms:        # the dataset's, then the multiscale's
+                if transform.get("type") == "scale":
+                    step = [float(f) for f in transform["scale"]]
+                    factors = [f * g for f, g in zip(factors, step, strict=True)]
+                    origin = [o * g for o, g in zip(origin, step, strict=True)]
+                elif transform.get("type") == "translation":
+                    shift = [float(t) for t in transform["translation"]]
+                    origin = [o + t for o, t in zip(origin, shift, strict=True)]
+        array = group[datasets[index]["path"]]
+    except VolumeFileError:
+        raise
     except (KeyError, IndexError, TypeError, ValueError, AttributeError) as err:
         raise VolumeFileError(f"{path}: malformed OME-Zarr 'multiscales' metadata "
                               f"({type(err).__name__}: {err})") from None
     if not hasattr(array, "ndim"):
-        raise VolumeFileError(f"{path}: the OME-Zarr level-0 dataset {level['path']!r} is a "
-                              "group, not an array")
+        raise VolumeFileError(f"{path}: the OME-Zarr level-{index} dataset "
+                              f"{datasets[index]['path']!r} is a group, not an array")
     if not axes:
         axes = ["t", "c", "z", "y", "x"][-array.ndim:]
+        units = [None] * array.ndim
     if len(axes) != array.ndim or len(factors) != array.ndim:
         raise VolumeFileError(f"{path}: OME-Zarr axes {axes} / scale {factors} do not match "
-                              f"the level-0 array's {array.ndim} dimensions")
-    return array, axes, factors
+                              f"the level-{index} array's {array.ndim} dimensions")
+    if not all(np.isfinite(v) for v in [*factors, *origin]):
+        raise VolumeFileError(f"{path}: OME-Zarr scale {factors} / translation {origin} must "
+                              "be finite numbers")
+    return array, axes, factors, origin, units
 
 
 #: A store declaring more chunks than this is refused before any is listed (the
@@ -66,15 +90,18 @@ def _ome_level0(group, path):
 MAX_CHUNKS = 2**24
 
 
-def _array_of(node, path, channel=None):
+def _array_of(node, path, channel=None, level=None):
     """(the array, the order of its x, y, z axes or None, its frame or None, the index
-    of each other axis) of an opened Zarr node: an OME-Zarr image's level 0 (its
-    `channel`, or its only one), or an array with volseg's attributes."""
+    of each other axis) of an opened Zarr node: an OME-Zarr image's `level` (default 0;
+    its `channel`, or its only one), or an array with volseg's attributes."""
     import zarr
 
     frame = None
+    if level is not None and not isinstance(node, zarr.Group):
+        raise VolumeFileError(f"{path}: a plain Zarr array has no levels (--ome-level "
+                              "applies to OME-Zarr images)")
     if isinstance(node, zarr.Group):
-        array, axes, factors = _ome_level0(node, path)
+        array, axes, factors, shift, units = _ome_level(node, path, level)
         keep = [i for i, name in enumerate(axes) if name in ("x", "y", "z")]
         pick = _other_axes(path, axes, array.shape, channel)
         if len(keep) != 3 or sorted(set(axes)) != sorted(axes):
@@ -82,7 +109,15 @@ def _array_of(node, path, channel=None):
                                   "volseg needs three spatial axes x, y, z")
         order = [keep[[axes[i] for i in keep].index(name)] for name in ("x", "y", "z")]
         spacing = tuple(factors[i] for i in order)
-        frame = Frame.from_spacing(spacing)
+        spatial_units = {length_unit(units[i]) for i in order}
+        try:
+            frame = Frame.from_spacing(spacing, unit=spatial_units.pop()
+                                       if len(spatial_units) == 1 else None)
+        except ValueError as err:
+            raise VolumeFileError(f"{path}: OME-Zarr scale: {err}") from None
+        affine = frame.affine.copy()
+        affine[:3, 3] = [shift[i] for i in order]
+        frame = Frame(affine, unit=frame.unit)
     else:
         array, pick = node, {}
         if channel is not None:
@@ -130,9 +165,9 @@ def _other_axes(path, axes, shape, channel) -> dict:
     return pick
 
 
-def _checked_array(node, path, allow_external_data, channel):
+def _checked_array(node, path, allow_external_data, channel, level=None):
     """`_array_of`, then every check that needs no chunk's values (see the module)."""
-    array, order, frame, pick = _array_of(node, path, channel)
+    array, order, frame, pick = _array_of(node, path, channel, level)
     if array.ndim != 3 and order is None:
         raise VolumeFileError(f"{path}: the Zarr array is {array.ndim}-D (shape {array.shape}); "
                               "volseg needs a 3-D volume")
@@ -152,12 +187,14 @@ def _checked_array(node, path, allow_external_data, channel):
     return array, order, frame, pick
 
 
-def read_zarr(path, *, allow_external_data: bool = False, channel=None) -> Volume:
+def read_zarr(path, *, allow_external_data: bool = False, channel=None,
+              ome_level=None) -> Volume:
     """Open a Zarr array or OME-Zarr image as a lazily read `Volume` (see the module).
 
     `allow_external_data`: let the store hold links to files outside it (refused by
     default: a store from elsewhere cannot make volseg read, and publish a checksum
-    of, any file). `channel`: of an OME-Zarr image with several."""
+    of, any file). `channel`: of an OME-Zarr image with several; `ome_level`: the
+    resolution level of an OME-Zarr image (default 0, the full resolution)."""
     import dask.array as da
     import zarr
 
@@ -168,7 +205,8 @@ def read_zarr(path, *, allow_external_data: bool = False, channel=None) -> Volum
         raise VolumeFileError(f"{path}: not a readable Zarr store ({type(err).__name__}: "
                               f"{err})") from None
     try:
-        array, order, frame, pick = _checked_array(node, path, allow_external_data, channel)
+        array, order, frame, pick = _checked_array(node, path, allow_external_data, channel,
+                                                   ome_level)
     except VolumeFileError:
         raise
     except Exception as err:  # noqa: BLE001 - hostile metadata breaks Zarr in any way
@@ -185,6 +223,7 @@ def read_zarr(path, *, allow_external_data: bool = False, channel=None) -> Volum
         raise VolumeFileError(f"{path}: the volume needs at least 2 samples along each axis, "
                               f"got shape {lazy.shape}")
     name = path.name[:-5] if path.name.endswith(".zarr") else path.name
+    name = name[:-4] if name.endswith(".ome") and len(name) > 4 else name
     return Volume(lazy, frame=frame or Frame.from_spacing((1.0, 1.0, 1.0)), name=name,
                   source=f"Zarr {dtype} chunks {array.chunks}", path=path, files=(path,))
 
