@@ -216,3 +216,38 @@ def test_compare_takes_whole_float_labels_and_names_a_file_of_fractions(tmp_path
     line = capsys.readouterr().err.strip()
     assert line == (f"volseg: error: {tmp_path / 'c.npy'}: label volumes must hold integer "
                     "labels, got float32 0.5 at voxel [3, 2, 1]")
+
+
+def test_first_run_note_and_in_memory_stage_progress(tmp_path, capsys, monkeypatch):
+    """A kernel without a cache index means a compilation: one line says so before it;
+    in-memory runs say each stage and the seconds the one before took (not one line
+    then silence); -q says nothing."""
+    import importlib
+    import sys
+
+    from volseg import _jit_cache
+
+    (tmp_path / "fresh_kernels.py").write_text(
+        "import numba\n@numba.njit(cache=True)\ndef twice(x):\n    return 2 * x\n")
+    sys.path.insert(0, str(tmp_path))
+    try:
+        module = importlib.import_module("fresh_kernels")
+        assert _jit_cache.uncompiled([module.twice]) == ["fresh_kernels.twice"]
+        assert module.twice(3) == 6                       # compiled and cached now
+        assert _jit_cache.uncompiled([module.twice]) == []
+    finally:
+        sys.path.remove(str(tmp_path))
+        sys.modules.pop("fresh_kernels", None)
+    source = tmp_path / "v_12x10x8_uint8.raw"
+    source.write_bytes(np.arange(960, dtype=np.uint8).tobytes())
+    monkeypatch.setattr(_jit_cache, "uncompiled", lambda kernels: ["a.kernel"])
+    assert main(["segment", str(source), "-o", str(tmp_path / "a"), "--regions", "2"]) == 0
+    err = capsys.readouterr().err.splitlines()
+    assert err[0].startswith("volseg: compiling the numba kernels (first run")
+    for stage in ("curvature done in", "morse done in", "cut done in"):
+        assert any(stage in line for line in err), (stage, err)
+    monkeypatch.setattr(_jit_cache, "uncompiled", lambda kernels: [])
+    assert main(["segment", str(source), "-o", str(tmp_path / "b"), "--regions", "2"]) == 0
+    assert "compiling" not in capsys.readouterr().err
+    assert main(["segment", str(source), "-o", str(tmp_path / "c"), "-q"]) == 0
+    assert capsys.readouterr().err == ""

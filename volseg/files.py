@@ -25,8 +25,11 @@ from pathlib import Path
 import numpy as np
 
 from . import _validate
+from ._jit_cache import first_run_note
+from .curvature import entry_kernels as curvature_kernels
 from .errors import UsageError
 from .io import Frame, OutputSet
+from .morse import entry_kernels as morse_kernels
 from .outputs import (
     degenerate_cut_warning,
     files_sha256,
@@ -192,6 +195,9 @@ def segment_files(volumes, out_dir, *, force=False, wait=False, persistence_plot
     """
     _refuse_noise_when_lazy(volumes, options.get("noise"))
     out_dir = check_out_dir(out_dir)
+    note = first_run_note([*curvature_kernels(), *morse_kernels()])
+    if note:
+        say(note)
     sets = output_sets(volumes, out_dir, force=force, wait=wait,
                        persistence_plot=persistence_plot, paraview=paraview)
     summaries = []
@@ -320,7 +326,7 @@ def _unchanged(paths, before: dict) -> None:
 
 def _storage(volume, data, request, paths, outputs, checksum, engine, say):
     if not _is_lazy(volume):
-        return InMemory()
+        return InMemory(say=lambda message: say(f"{volume.name}: {message}"))
     from .blockwise import BlockwiseStorage
 
     if request.mask not in (None, "none"):

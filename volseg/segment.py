@@ -307,9 +307,26 @@ class Storage:
     def finish(self) -> None:
         """Called once the outputs are committed (the blockwise work folder goes)."""
 
+    def stage(self, name: str) -> None:
+        """Called as each stage (curvature, morse, cut, labels) starts: progress."""
+
 
 class InMemory(Storage):
-    """Keep every stage as computed (`Storage`'s hooks as they are)."""
+    """Keep every stage as computed (`Storage`'s hooks as they are); `say`, when
+    given, is told each stage as it starts and the seconds the one before took."""
+
+    def __init__(self, say=None):
+        self._say, self._started, self._stage = say, None, None
+
+    def stage(self, name: str) -> None:
+        if self._say is None:
+            return
+        now = time.perf_counter()
+        if self._stage is not None:
+            self._say(f"{self._stage} done in {now - self._started:.1f} s; {name}")
+        else:
+            self._say(name)
+        self._started, self._stage = now, name
 
 
 def run_stages(data, request: SegmentRequest, storage: Storage | None = None, *,
@@ -341,7 +358,7 @@ def run_stages(data, request: SegmentRequest, storage: Storage | None = None, *,
     storage.begin(choice, request)
     hooks = storage.block_hooks       # set by `begin` (the blockwise work folder's)
     timings = {}
-    with _timed(timings, "curvature"):
+    with _timed(timings, "curvature", storage):
         values = storage.smoothed(gaussian(data, request.smooth_sigma))
         scale = request.value_scale
         if scale is None:
@@ -364,17 +381,17 @@ def _morse_and_cut(field, cut: CutRequest, timings, *, mask=None, adjacency=None
                    vertex_weight=None, storage: Storage) -> tuple:
     """The Morse stage and the cut: (hierarchy, labels 1..k, k, cut record), sizes
     counted in `vertex_weight` per vertex (`MorseHierarchy.with_vertex_weight`)."""
-    with _timed(timings, "morse"):
+    with _timed(timings, "morse", storage):
         hierarchy = descending_complex(field, adjacency=adjacency, mask=mask,
                                        block_hooks=storage.block_hooks)
         if vertex_weight is not None:
             hierarchy = hierarchy.with_vertex_weight(vertex_weight)
-    with _timed(timings, "cut"):
+    with _timed(timings, "cut", storage):
         asked = cut.of(hierarchy)
         region = hierarchy.region_of_maximum(**asked)
         labels = hierarchy.relabel(region)     # regions 1..k, 0 outside a mask
         k = int(region.max()) + 1
-    with _timed(timings, "labels"):
+    with _timed(timings, "labels", storage):
         labels = storage.labels(labels, k)
     threshold = (float(cut.threshold) if cut.threshold is not None
                  else hierarchy.threshold_for(k, cut.measure, asked["min_component"]))
@@ -393,7 +410,9 @@ def _cut_fields(record) -> dict:
 
 
 @contextmanager
-def _timed(timings: dict, stage: str):
+def _timed(timings: dict, stage: str, storage: Storage | None = None):
+    if storage is not None:
+        storage.stage(stage)
     start = time.perf_counter()
     yield
     timings[stage] = timings.get(stage, 0.0) + time.perf_counter() - start

@@ -51,4 +51,13 @@ from ._hierarchy import MorseHierarchy, check_cut, check_measure_cut
 from ._measures import MEASURES
 
 __all__ = ["descending_complex", "MorseHierarchy", "grid_offsets", "check_cut",
-           "check_measure_cut", "MEASURES"]
+           "check_measure_cut", "MEASURES", "entry_kernels"]
+
+
+def entry_kernels() -> list:
+    """The numba kernels of this package called from Python (compiled on a first run,
+    cached after it: `volseg._jit_cache`); the helpers they inline have no cache."""
+    from ._kernels import steepest_ascent
+    from ._prune import prune
+
+    return [steepest_ascent, prune]
