@@ -33,6 +33,25 @@ def _npy() -> bytes:
     return buffer.getvalue()
 
 
+def _mha() -> bytes:
+    import tempfile
+
+    import SimpleITK as sitk
+
+    with tempfile.TemporaryDirectory() as folder:
+        sitk.WriteImage(sitk.GetImageFromArray(DATA.transpose(2, 1, 0)), f"{folder}/m.mha")
+        with open(f"{folder}/m.mha", "rb") as handle:
+            return handle.read()
+
+
+def _tiff() -> bytes:
+    import tifffile
+
+    buffer = _bytes_io.BytesIO()
+    tifffile.imwrite(buffer, DATA.transpose(2, 1, 0))
+    return buffer.getvalue()
+
+
 # name -> {file name: bytes}; the first file is the one read.
 VALID = {
     "raw": {"v_6x5x4_uint16.raw": RAW},
@@ -47,6 +66,8 @@ VALID = {
     "npy": {"n.npy": _npy()},
     "nii": {"i.nii": _nifti(False)},
     "nii-gz": {"z.nii.gz": _nifti(True)},
+    "mha": {"m.mha": _mha()},
+    "tiff": {"s.tif": _tiff()},
 }
 
 mutations = st.lists(
@@ -125,7 +146,7 @@ def test_mutated_files_fail_only_as_volume_file_errors(tmp_path_factory, kind, s
 
 
 @pytest.mark.parametrize("name", ["r_6x5x4_uint16.raw", "t.dat", "x.nrrd", "y.nhdr", "w.npy",
-                                  "u.nii", "k.nii.gz"])
+                                  "u.nii", "k.nii.gz", "c.mha", "p.tif"])
 @FUZZ
 @given(content=st.binary(max_size=4096))
 def test_random_bytes_fail_only_as_volume_file_errors(tmp_path_factory, name, content):

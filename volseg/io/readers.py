@@ -375,6 +375,26 @@ def _squeezed(data: NDArray) -> NDArray:
     return data
 
 
+def _read_metaimage(path: Path, shape, dtype, byte_order, allow_external, mapped=False):
+    from .readers_more import read_metaimage
+
+    _no_raw_options(path, shape, dtype, byte_order)
+    return read_metaimage(path, allow_external)
+
+
+def _read_tiff(path: Path, shape, dtype, byte_order, allow_external, mapped=False):
+    from .readers_more import read_tiff
+
+    _no_raw_options(path, shape, dtype, byte_order)
+    return read_tiff(path)
+
+
+def _no_raw_options(path, shape, dtype, byte_order):
+    if shape is not None or dtype is not None or byte_order is not None:
+        raise VolumeFileError(f"{path}: --shape, --dtype and byte order are for raw files; "
+                              "this header says them")
+
+
 def _check(path, data: NDArray) -> NDArray:
     return _validate.volume_array(_squeezed(data), source=path, error=VolumeFileError)
 
@@ -393,8 +413,21 @@ def _lazy(path, data: NDArray, chunks):
     return da.from_array(_check(path, data), chunks=chunks)
 
 
+def _is_tiff_folder(path: Path) -> bool:
+    """A folder of .tif / .tiff slices (and nothing that makes it a Zarr store)."""
+    try:
+        return path.is_dir() and any(p.suffix.lower() in (".tif", ".tiff")
+                                     for p in path.iterdir())
+    except OSError:             # a name too long, no permission: the file checks say so
+        return False
+
+
 def _reader(path: Path):
     name = path.name.lower()
+    if name.endswith((".mha", ".mhd")):
+        return _read_metaimage
+    if name.endswith((".tif", ".tiff")):
+        return _read_tiff
     if name.endswith((".nii", ".nii.gz")):
         return _read_nifti
     if name.endswith((".nrrd", ".nhdr")):
@@ -506,9 +539,11 @@ def read_volume(path, *, shape=None, dtype=None, byte_order=None,
                          ome_level=ome_level)
     if channel is not None or ome_level is not None:
         raise ValueError(f"{path}: `channel` and `ome_level` apply to OME-Zarr images only")
-    regular_file_size(path)  # missing, a folder, a device or a pipe: refused before opening
+    reader = _read_tiff if _is_tiff_folder(path) else _reader(path)
+    if reader is not _read_tiff or not path.is_dir():
+        regular_file_size(path)  # missing, a folder, a device or a pipe: refused before opening
     try:
-        data, frame, short, source, files = _reader(path)(
+        data, frame, short, source, files = reader(
             path, shape, dtype, byte_order, allow_external_data, mapped=chunks is not None)
     except MemoryError:
         raise VolumeFileError(f"{path}: the declared size does not fit in this machine's "
