@@ -151,6 +151,9 @@ def _add_isosurface(sub):
     iso.add_argument("--level", type=float, required=True, metavar="L", help="isosurface value")
     iso.add_argument("--time-scale", type=float, default=1.0, metavar="S",
                      help="length of one time step in R^4, in voxel-size units (default 1)")
+    iso.add_argument("--time-step", type=float, metavar="DT",
+                     help="time between two steps, for the ParaView series' time values "
+                     "(default: a 4-D NIfTI's pixdim[4], else 1)")
     iso.add_argument("-o", "--out-dir", default=".", help="output folder (default: .)")
     iso.add_argument("--name", help="output stem (default: the first input's name)")
     iso.add_argument("--operator", choices=operators, metavar=shown, default="weighted")
@@ -311,6 +314,8 @@ def _cmd_isosurface(args):
         if not args.name.strip() or "/" in args.name or args.name.startswith("."):
             raise UsageError(f"--name must be a plain file stem, got {args.name!r}")
         series.name = args.name
+    if args.time_step is not None:
+        series.time_step = _validate.number(args.time_step, "--time-step", positive=True)
     lo, hi = float(np.min(series.data)), float(np.max(series.data))
     if not lo < args.level <= hi:
         raise UsageError(f"--level {args.level:g} is not crossed: the series ranges over "

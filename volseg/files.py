@@ -367,7 +367,9 @@ def series_to_files(series, level, outputs, *, time_scale=1.0, relax=10, operato
     info["timings_s"]["total"] = round(time.perf_counter() - started, 4)
     title = (f"{series.name}: isosurface {level:g} in space-time, {seg.n_regions} regions "
              f"({seg.operator.replace('_', '-')} curvature)")
-    return write_series_segmentation(outputs, result, slices, info, title=title)
+    info["time_step"], info["time_unit"] = series.time_step, series.time_unit
+    return write_series_segmentation(outputs, result, slices, info, title=title,
+                                     frame=series.frame, time_step=series.time_step)
 
 
 def segment_series_files(series, level, out_dir, *, force=False, wait=False, say=_quiet,

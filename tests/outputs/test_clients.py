@@ -155,3 +155,60 @@ def test_ngff_pyramids_sample_labels_and_average_curvature(tmp_path):
         scale, translation = node.metadata["coordinateTransformations"][1]
         np.testing.assert_allclose(scale["scale"], [6.0, 4.0, 2.0])
         np.testing.assert_allclose(translation["translation"], np.array([3.0, 2.0, 1.0]) * shift)
+
+
+def test_isosurface_series_in_world_space_with_real_time_and_normals(tmp_path):
+    """A 4-D NIfTI, rotated, translated, 2.5 s per step: the .pvd's time values are
+    0, 2.5, 5, ..., every .vtu (read with VTK's XML reader, ParaView's) sits in the
+    input's world coordinates (its points are the affine of the mesh's voxel
+    positions) and carries unit point normals as its Normals attribute."""
+    import xml.etree.ElementTree as ElementTree
+
+    vtk = pytest.importorskip("vtk")
+    from vtk.util.numpy_support import vtk_to_numpy
+
+    from volseg.datasets import demo_series
+
+    series = demo_series(14, 4)
+    affine = np.eye(4)
+    affine[:3] = ROTATED_UM[:3]
+    image = nibabel.Nifti1Image(series, affine)
+    image.header.set_sform(affine, 2)
+    image.header.set_xyzt_units("micron", "sec")
+    image.header["pixdim"][4] = 2.5
+    nibabel.save(image, tmp_path / "run.nii.gz")
+    assert main(["isosurface", str(tmp_path / "run.nii.gz"), "--level", "0.5", "-o",
+                 str(tmp_path / "o"), "-q", "--regions", "2", "--relax", "0"]) == 0
+    collection = ElementTree.parse(tmp_path / "o" / "run_iso.pvd").getroot()
+    steps = collection.findall("./Collection/DataSet")
+    assert [float(s.get("timestep")) for s in steps] == [0.0, 2.5, 5.0, 7.5]
+    mesh = np.load(tmp_path / "o" / "run_iso.npz")
+    spacing = mesh["spacing"][:3]
+    affine = nibabel.load(tmp_path / "run.nii.gz").affine         # as stored (float32)
+    for dataset in steps:
+        reader = vtk.vtkXMLUnstructuredGridReader()
+        reader.SetFileName(str(tmp_path / "o" / dataset.get("file")))
+        reader.Update()
+        grid = reader.GetOutput()
+        if not grid.GetNumberOfPoints():
+            continue
+        points = vtk_to_numpy(grid.GetPoints().GetData())
+        vertex = vtk_to_numpy(grid.GetPointData().GetArray("vertex"))
+        voxel = mesh["vertices"][vertex, :3] / spacing            # voxel index positions
+        np.testing.assert_allclose(points, voxel @ affine[:3, :3].T + affine[:3, 3],
+                                   atol=1e-9)
+        normals = vtk_to_numpy(grid.GetPointData().GetNormals())
+        lengths = np.linalg.norm(normals, axis=1)
+        assert np.all((np.abs(lengths - 1) < 1e-5) | (lengths == 0)) and lengths.mean() > 0.9
+        # Toward lower values: along each vertex's grid edge from its higher end to its
+        # lower one (edges along t have no direction in space).
+        ends = mesh["grid_edges"][vertex]
+        index = np.stack(np.unravel_index(ends.ravel(), series.shape), 1).reshape(-1, 2, 4)
+        values = series.ravel()[ends]
+        high = np.where((values[:, 0] > values[:, 1])[:, None], index[:, 0], index[:, 1])
+        low = np.where((values[:, 0] > values[:, 1])[:, None], index[:, 1], index[:, 0])
+        downhill = (low - high)[:, :3] @ affine[:3, :3].T
+        spatial = np.linalg.norm(downhill, axis=1) > 0
+        assert np.mean(np.sum(normals * downhill, axis=1)[spatial] > 0) > 0.95
+    summary = __import__("json").loads((tmp_path / "o" / "run_iso_summary.json").read_text())
+    assert (summary["time_step"], summary["time_unit"]) == (2.5, "second")

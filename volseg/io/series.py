@@ -40,6 +40,12 @@ class Series:
         Every file read, in time order.
     frame : Frame
         Voxel-to-world frame of the first step.
+    time_step : float
+        The time between two steps, in `time_unit` (a 4-D NIfTI's pixdim[4]; 1
+        when the input does not say).
+    time_unit : str or None
+        ``"second"``, ``"millisecond"`` or ``"microsecond"`` (NIfTI's time units),
+        None when unknown.
     """
 
     data: NDArray
@@ -47,6 +53,8 @@ class Series:
     name: str
     files: tuple = field(default_factory=tuple)
     frame: Frame | None = None
+    time_step: float = 1.0
+    time_unit: str | None = None
 
     @property
     def shape(self) -> tuple:
@@ -65,6 +73,22 @@ def _expand(inputs) -> list[Path]:
         else:
             paths.append(Path(text))
     return paths
+
+
+#: NIfTI's time units as their full names.
+_NIFTI_TIME_UNITS = {"sec": "second", "msec": "millisecond", "usec": "microsecond"}
+
+
+def _nifti_time(path: Path) -> tuple:
+    """(time step, unit) of a 4-D NIfTI: pixdim[4] and the xyzt_units time code; a
+    step that is not a positive finite number is 1 (unknown)."""
+    import nibabel
+
+    header = nibabel.load(path).header
+    zooms = header.get_zooms()
+    step = float(zooms[3]) if len(zooms) > 3 else 1.0
+    unit = _NIFTI_TIME_UNITS.get(header.get_xyzt_units()[1])
+    return (step, unit) if np.isfinite(step) and step > 0 else (1.0, None)
 
 
 def _zarr_series(path: Path) -> Series:
@@ -139,7 +163,8 @@ def read_series(inputs, *, allow_external_data: bool = False) -> Series:
                                   "memory") from None
         data = _validate.volume_array(data, source=path, error=VolumeFileError, ndim=4)
         frame = frame or Frame.from_spacing((1.0, 1.0, 1.0))
-        return Series(data, tuple(frame.spacing), name, tuple(files), frame)
+        step, unit = _nifti_time(path) if not lower.endswith(".npy") else (1.0, None)
+        return Series(data, tuple(frame.spacing), name, tuple(files), frame, step, unit)
     steps = [read_volume(p, allow_external_data=allow_external_data) for p in paths]
     first = steps[0]
     for path, step in zip(paths[1:], steps[1:], strict=True):

@@ -3,8 +3,9 @@
 - ``<stem>_iso.npz``: vertices (V, 4), tetrahedra (S, 4), curvature and labels per
   vertex, boundary faces, each vertex's grid edge, and the level, spacing and shape;
 - ``<stem>_iso.pvd`` with ``<stem>_iso_tNNNN.vtu``: a ParaView time series, the
-  isosurface of each time step (exact slices of the space-time mesh), coloured by
-  the space-time curvature and labels (written with meshio);
+  isosurface of each time step (exact slices of the space-time mesh) in the input's
+  world coordinates, with point normals, coloured by the space-time curvature and
+  labels, at the input's time values (written with meshio);
 - ``<stem>_iso_summary.json``: strict JSON, the summary shared with volumes plus
   the mesh, its quality and the regions present at each step;
 - ``<stem>_iso_preview.png``: three time steps side by side, regions coloured, so a
@@ -23,7 +24,8 @@ import numpy as np
 from .. import _json
 from ._summary import input_summary, result_summary
 
-__all__ = ["series_output_names", "series_summary", "write_series_segmentation"]
+__all__ = ["series_output_names", "series_summary", "write_series_segmentation",
+           "world_points"]
 
 
 def series_output_names(stem: str, steps: int) -> dict:
@@ -71,17 +73,43 @@ def _write_pvd(path, vtu_names, times):
                           f"  <Collection>\n{rows}\n  </Collection>\n</VTKFile>\n")
 
 
-def _write_vtu(path, result, piece):
+def world_points(result, frame) -> tuple:
+    """(V, 3) world positions and (V, 3) unit normals of the space-time mesh's vertices
+    in `frame` (the input's: origin, rotation, voxel sizes). The mesh is built in
+    voxel units times the spacing; its 4-D vertex normals' spatial parts are each step's
+    surface normals (toward lower values), carried to the world by the inverse
+    transpose. A vertex where the surface is flat in space (a feature appearing) gets
+    a zero normal."""
+    from ..mesh import per_vertex_normals
+
+    spacing = np.asarray(result.spacing[:3], dtype=np.float64)
+    linear = frame.affine[:3, :3] / spacing               # spaced mesh units -> world
+    vertices = result.surface.vertices
+    points = vertices[:, :3] @ linear.T + frame.affine[:3, 3]
+    normals = per_vertex_normals(vertices, result.surface.simplices)[:, :3]
+    normals = normals @ np.linalg.inv(linear)              # (inverse transpose) applied
+    with np.errstate(invalid="ignore", divide="ignore"):
+        normals = normals / np.linalg.norm(normals, axis=1, keepdims=True)
+    return points, np.nan_to_num(normals, nan=0.0)
+
+
+def _write_vtu(path, result, piece, points, normals):
     import meshio
 
     seg = result.segmentation
-    points = result.surface.vertices[piece.vertex, :3]
     cells = [("triangle", piece.triangles)] if len(piece.triangles) else []
-    mesh = meshio.Mesh(points, cells, point_data={
+    mesh = meshio.Mesh(points[piece.vertex], cells, point_data={
         "curvature": seg.curvature[piece.vertex].astype(np.float32),
         "label": seg.labels[piece.vertex].astype(np.int32),
-        "vertex": piece.vertex.astype(np.int64)})
+        "vertex": piece.vertex.astype(np.int64),
+        "Normals": normals[piece.vertex].astype(np.float32)})
     meshio.write(path, mesh, file_format="vtu")
+    # meshio names no attribute: mark the normals (ParaView shades with them) and the
+    # labels as the active scalars. Appended-data offsets count from the data section,
+    # so the longer header moves nothing.
+    text = Path(path).read_bytes()
+    Path(path).write_bytes(text.replace(b"<PointData>",
+                                        b'<PointData Normals="Normals" Scalars="label">', 1))
 
 
 def _preview_steps(slices) -> list:
@@ -131,11 +159,17 @@ def write_series_preview(path, result, slices, *, title=""):
     return Path(path)
 
 
-def write_series_segmentation(outputs, result, slices, info: dict, *, title: str) -> dict:
-    """Write mesh, ParaView series, summary and preview of `result` as one set."""
+def write_series_segmentation(outputs, result, slices, info: dict, *, title: str,
+                              frame=None, time_step: float = 1.0) -> dict:
+    """Write mesh, ParaView series, summary and preview of `result` as one set: the
+    series' meshes in `frame`'s world coordinates (default: the spacing alone), their
+    time values `time_step` apart."""
+    from ..io import Frame
+
     info = {**info, "outputs": {kind: str(path) for kind, path in outputs.targets.items()}}
     seg = result.segmentation
     surface = result.surface
+    points, normals = world_points(result, frame or Frame.from_spacing(result.spacing[:3]))
 
     def write(paths):
         np.savez_compressed(paths["mesh"], vertices=surface.vertices, tetrahedra=surface.simplices,
@@ -146,9 +180,9 @@ def write_series_segmentation(outputs, result, slices, info: dict, *, title: str
         names = []
         for piece in slices:
             target = paths[f"t{piece.step:04d}"]
-            _write_vtu(target, result, piece)
+            _write_vtu(target, result, piece, points, normals)
             names.append(Path(outputs.targets[f"t{piece.step:04d}"]).name)
-        _write_pvd(paths["pvd"], names, [float(s.step) for s in slices])
+        _write_pvd(paths["pvd"], names, [float(s.step) * time_step for s in slices])
         write_series_preview(paths["preview"], result, slices, title=title)
         Path(paths["summary"]).write_text(_json.dumps(info, indent=2))
 
