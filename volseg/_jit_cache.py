@@ -1,5 +1,5 @@
 """Whether numba has this install's kernels cached: the first run after an install
-compiles them (about 45 s on 2 cores, in silence otherwise), every later run loads them.
+compiles them (about 30 s on 2 cores, in silence otherwise), every later run loads them.
 """
 
 from __future__ import annotations
@@ -8,9 +8,9 @@ import os
 
 __all__ = ["uncompiled", "first_run_note"]
 
-#: Measured on this project's 2-core machine: a clean install's first `volseg segment`
-#: of the demo volume against the second (benchmarks/bench_first_run.py).
-FIRST_RUN_SECONDS = 45
+#: Measured on this project's 2-core machine: a clean worktree's first `volseg demo`
+#: took 29.9 s, the second 3.0 s (benchmarks/bench_first_run.py), rounded.
+FIRST_RUN_SECONDS = 30
 
 
 def uncompiled(kernels) -> list[str]:
