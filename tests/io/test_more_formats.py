@@ -90,3 +90,12 @@ def test_bad_metaimage_and_tiff_files_exit_2_with_one_line(tmp_path, capsys):
         assert len(err.splitlines()) == 1 and str(tmp_path / name) in err, err
         assert main(["info", str(tmp_path / name)]) == 2
         capsys.readouterr()
+
+
+def test_volseg_info_on_metaimage_and_tiff(tmp_path, capsys):
+    _metaimage(tmp_path / "ct.mha")
+    tifffile.imwrite(tmp_path / "s.tif", DATA.transpose(2, 1, 0).astype(np.uint16))
+    for name in ("ct.mha", "s.tif"):
+        assert main(["info", str(tmp_path / name)]) == 0
+        out = capsys.readouterr().out
+        assert "shape (x, y, z): (9, 8, 7)" in out and name in out
