@@ -212,3 +212,23 @@ def test_isosurface_series_in_world_space_with_real_time_and_normals(tmp_path):
         assert np.mean(np.sum(normals * downhill, axis=1)[spatial] > 0) > 0.95
     summary = __import__("json").loads((tmp_path / "o" / "run_iso_summary.json").read_text())
     assert (summary["time_step"], summary["time_unit"]) == (2.5, "second")
+
+
+def test_napari_ome_zarr_opens_an_image_and_a_labels_layer(run):
+    """napari-ome-zarr's reader function (no viewer): the curvature as an image layer,
+    the regions as a labels layer, both with the input's voxel sizes and units.
+    Its 0.10 reads only the first transform of dataset 0 (the scale), so it drops any
+    NGFF 0.4/0.5 translation, ours included: the file has it (the test above)."""
+    napari_ome_zarr = pytest.importorskip("napari_ome_zarr")
+
+    path = str(run / "cell_segmentation.ome.zarr")
+    layers = {kind: (data, options) for data, options, kind in
+              napari_ome_zarr.napari_get_reader(path)(path)}
+    assert sorted(layers) == ["image", "labels"]
+    nifti = np.asarray(nibabel.load(run / "cell_labels.nii.gz").dataobj)
+    data, options = layers["labels"]
+    np.testing.assert_array_equal(np.asarray(data[0] if isinstance(data, list) else data),
+                                  nifti.transpose(2, 1, 0))
+    for _, options in layers.values():
+        np.testing.assert_allclose(options["scale"], [0.8, 0.5, 0.4], rtol=1e-6)
+        assert options["units"] == ("micrometer",) * 3
