@@ -20,7 +20,7 @@ import tempfile
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+from _common import worktree      # benchmarks/ is the script's folder: first on sys.path
 
 
 def _run(tree: Path, out: Path) -> tuple[float, str]:
@@ -39,16 +39,9 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rev", default="HEAD")
     args = parser.parse_args()
-    with tempfile.TemporaryDirectory() as folder:
-        tree = Path(folder) / "tree"
-        subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(tree),
-                        args.rev], check=True, capture_output=True)
-        try:
-            first, said_first = _run(tree, Path(folder) / "a")
-            second, said_second = _run(tree, Path(folder) / "b")
-        finally:
-            subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(tree)],
-                           check=False, capture_output=True)
+    with worktree(args.rev) as tree, tempfile.TemporaryDirectory() as folder:
+        first, said_first = _run(tree, Path(folder) / "a")
+        second, said_second = _run(tree, Path(folder) / "b")
     note = "compiling the numba kernels"
     print(f"first run {first:.1f} s (note printed: {note in said_first}), second run "
           f"{second:.1f} s (note printed: {note in said_second}); compilation about "
