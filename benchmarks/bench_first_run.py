@@ -20,7 +20,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from _common import worktree      # benchmarks/ is the script's folder: first on sys.path
+from _common import worktree  # benchmarks/ is the script's folder: first on sys.path
 
 
 def _run(tree: Path, out: Path) -> tuple[float, str]:
