@@ -48,7 +48,7 @@ def _tiff() -> bytes:
     import tifffile
 
     buffer = _bytes_io.BytesIO()
-    tifffile.imwrite(buffer, DATA.transpose(2, 1, 0))
+    tifffile.imwrite(buffer, DATA.transpose(2, 1, 0), photometric="minisblack")
     return buffer.getvalue()
 
 
