@@ -36,9 +36,15 @@ def _nifti(path: Path, data, frame: Frame, compressed: bool, labels: bool, descr
     header.set_xyzt_units(_NIFTI_UNITS.get(frame.unit, "unknown"))
     if labels:                  # a label map: viewers pick a lookup table, not a grey ramp
         header.set_intent("label")
-    finite = data[np.isfinite(data)] if data.dtype.kind == "f" else data
-    if finite.size:             # the display range: 0..k for labels, the values' range
-        header["cal_min"], header["cal_max"] = (0 if labels else finite.min()), finite.max()
+    if data.size:               # the display range: 0..k for labels, the values' range
+        if data.dtype.kind == "f":                  # over the finite values, no copy
+            finite = np.isfinite(data)
+            low = np.min(data, where=finite, initial=np.inf)
+            high = np.max(data, where=finite, initial=-np.inf)
+        else:
+            low, high = data.min(), data.max()
+        if np.isfinite(low) and np.isfinite(high):
+            header["cal_min"], header["cal_max"] = (0 if labels else low), high
     if description:
         header["descrip"] = description.encode("ascii", "replace")[:79]
     # nibabel picks gzip from the name: write under a .nii(.gz) name, then move.
