@@ -178,9 +178,7 @@ class Engine:
         self._stack.close()
         self.client = None
         if kind is not None and kind.__name__ == "KilledWorker":     # outside `compute`
-            raise EngineError(f"Dask workers died running the same task, over their memory "
-                              f"limit ({self._per_worker()}); give more --memory-limit, fewer "
-                              "--workers or smaller --chunks") from None
+            raise self._over_limit(_KILLED) from None
 
     def check(self) -> None:
         """For a scheduler address: connect once now, so that an unreachable one is an
@@ -271,20 +269,23 @@ class Engine:
                 return tuple(self.client.gather(futures))
         except KilledWorker:
             self.client.cancel(futures)
-            raise EngineError(
-                f"{stage}: Dask workers died running the same task, over their memory limit "
-                f"({self._per_worker()}); give more --memory-limit, fewer --workers or "
-                "smaller --chunks") from None
+            raise self._over_limit(f"{stage}: {_KILLED}") from None
         except CancelledError:
             if watchdog.reason is None:
                 raise
-            raise EngineError(f"{stage}: {watchdog.reason} ({self._per_worker()}); give more "
-                              "--memory-limit, fewer --workers or smaller --chunks") from None
+            raise self._over_limit(f"{stage}: {watchdog.reason}") from None
 
-    def _per_worker(self) -> str:
-        if self.scheduler == "local":
-            return f"{self.memory_limit / self.workers / 2**20:.0f} MiB per worker"
-        return f"the cluster at {self.scheduler}"
+    def _over_limit(self, what: str) -> EngineError:
+        """The one line of a cluster stopped at its memory limit: `what` happened, the
+        limit, and what to change."""
+        limit = (f"{self.memory_limit / self.workers / 2**20:.0f} MiB per worker"
+                 if self.scheduler == "local" else f"the cluster at {self.scheduler}")
+        return EngineError(f"{what} ({limit}); give more --memory-limit, fewer --workers or "
+                           "smaller --chunks")
+
+
+#: What `KilledWorker` means here: distributed gave up on a task after its workers died.
+_KILLED = "Dask workers died running the same task, over their memory limit"
 
 
 #: Every worker paused at its memory limit this long, with work pending: the run stops.
