@@ -348,7 +348,7 @@ def run_stages(data, request: SegmentRequest, storage: Storage | None = None, *,
     (Segmentation, (min, max) of the input's values)
     """
     storage = storage or InMemory()
-    value_range = _value_range(data, None)            # one pass, before anything is kept
+    value_range = _value_range(data)                  # one pass, before anything is kept
     if not all(np.isfinite(v) for v in value_range):
         raise ValueError(f"{source} holds NaN or infinite values (its range is "
                          f"{value_range[0]} .. {value_range[1]}); replace them first")
@@ -450,11 +450,11 @@ def _exact_in_float64(data, value_range) -> tuple:
     return shifted, (0, int(hi) - int(lo))
 
 
-def _value_range(data, hooks) -> tuple:
+def _value_range(data) -> tuple:
     """(min, max) of the input, in one pass (the value scale and the preview's grey
-    scale both read it)."""
+    scale both read it), before any stage's block hooks exist."""
     if _validate.is_lazy(data):
-        return tuple(v.item() for v in _compute(hooks, data.min(), data.max(),
+        return tuple(v.item() for v in _compute(None, data.min(), data.max(),
                                                 stage="value range"))
     return (np.min(data).item(), np.max(data).item())
 
