@@ -108,16 +108,13 @@ def _array_of(node, path, channel=None, level=None):
             raise VolumeFileError(f"{path}: OME-Zarr image of axes {axes} and shape {array.shape}: "
                                   "volseg needs three spatial axes x, y, z")
         order = [keep[[axes[i] for i in keep].index(name)] for name in ("x", "y", "z")]
-        spacing = tuple(factors[i] for i in order)
         spatial_units = {length_unit(units[i]) for i in order}
+        affine = np.diag([*(factors[i] for i in order), 1.0])
+        affine[:3, 3] = [shift[i] for i in order]
         try:
-            frame = Frame.from_spacing(spacing, unit=spatial_units.pop()
-                                       if len(spatial_units) == 1 else None)
+            frame = Frame(affine, unit=spatial_units.pop() if len(spatial_units) == 1 else None)
         except ValueError as err:
             raise VolumeFileError(f"{path}: OME-Zarr scale: {err}") from None
-        affine = frame.affine.copy()
-        affine[:3, 3] = [shift[i] for i in order]
-        frame = Frame(affine, unit=frame.unit)
     else:
         array, pick = node, {}
         if channel is not None:
