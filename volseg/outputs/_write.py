@@ -33,8 +33,10 @@ def write_result_files(paths: dict, result, values, info: dict, *, frame: Frame 
     frame = frame or Frame.from_spacing(result.spacing)
     k = int(result.n_regions)
     label_type = np.min_scalar_type(max(k, 0))
-    arrays = {"labels": lambda: result.labels.astype(label_type),
-              "curvature": lambda: result.curvature.astype(np.float32)}
+    # Cast once, for every writer that takes them (NIfTI, Zarr, NGFF, ParaView); lazy
+    # arrays stay lazy.
+    arrays = {"labels": result.labels.astype(label_type),
+              "curvature": result.curvature.astype(np.float32)}
     hierarchy = result.hierarchy
     curve = (*hierarchy.curve(result.measure, result.cut.get("min_component", 0.0)),
              result.threshold)
@@ -48,12 +50,11 @@ def write_result_files(paths: dict, result, values, info: dict, *, frame: Frame 
                                 result.labels, title=title, persistence=curve,
                                 value_range=value_range, n_labels=k, measure=result.measure))
         if "ngff" in paths:
-            jobs.append(pool.submit(write_ngff, paths["ngff"], arrays["labels"](),
-                                    result.curvature, frame))
+            jobs.append(pool.submit(write_ngff, paths["ngff"], arrays["labels"],
+                                    result.curvature, frame))     # its means in float64
         if "paraview" in paths:
             jobs.append(pool.submit(write_vti, paths["paraview"],
-                                    {"labels": arrays["labels"](), "curvature":
-                                     arrays["curvature"](), "values": values}, frame))
+                                    {**arrays, "values": values}, frame))
         if "persistence" in paths:
             jobs.append(pool.submit(write_persistence_plot, paths["persistence"], *curve, k,
                                     measure=result.measure))
@@ -62,8 +63,7 @@ def write_result_files(paths: dict, result, values, info: dict, *, frame: Frame 
     Path(paths["summary"]).write_text(_json.dumps(info, indent=2))
 
 
-def _write_array(path: Path, make, frame, kind: str, description: str):
-    array = make()
+def _write_array(path: Path, array, frame, kind: str, description: str):
     if path.name.endswith(".zarr"):
         write_zarr(path, array, frame=frame)
     else:
