@@ -39,7 +39,7 @@ from .outputs import (
     summary,
     write_result_files,
 )
-from .segment import InMemory, SegmentRequest, run_stages
+from .segment import InMemory, SegmentRequest, input_range, run_stages
 
 __all__ = ["segment_files", "segment_to_files", "series_to_files", "segment_series_files",
            "load_volume", "load_for_budget", "chunked", "output_sets", "check_out_dir"]
@@ -250,7 +250,6 @@ def segment_to_files(volume, outputs, *, operator="weighted", n_regions=None,
         min_component=min_component, dtype=dtype)
     read_as = _file_states(volume.files)      # before the checksum reads them
     name, checksum = volume.name, files_sha256(volume.files)
-    frame = volume.frame or Frame.from_spacing(request.spacing)
     done = {}
 
     def write(paths):
@@ -262,28 +261,66 @@ def segment_to_files(volume, outputs, *, operator="weighted", n_regions=None,
             f"{'x'.join(map(str, data.shape))} volume{blocks}")
         result, value_range = _stages_saying_warnings(data, request, storage, name, say,
                                                       str(volume.path or name))
-        say(f"{name}: {result.n_regions} regions{result.mask.phrase()} from "
-            f"{len(result.hierarchy.maxima)} maxima; writing")
-        info = summary(result, name=name, source=volume.path, checksum=checksum,
-                       files=volume.files, frame=frame, noise=noise, seed=seed,
-                       requested_regions=n_regions)
-        if lazy:
-            info["blockwise"] = storage.describe(result.hierarchy)
-        info["timings_s"]["total"] = round(time.perf_counter() - started, 4)
-        info["outputs"] = {kind: str(path) for kind, path in outputs.targets.items()}
-        warning = degenerate_cut_warning(name, result, info["spread"], data.dtype)
-        if warning:
-            say(warning)
-        write_result_files(paths, result, data, info, frame=frame,
-                           title=result_title(name, result, blockwise=lazy,
-                                              spread=info["spread"]),
-                           value_range=value_range)
+        info = _write_result(paths, volume, result, data, value_range, outputs,
+                             checksum=checksum, noise=noise, seed=seed,
+                             requested_regions=n_regions, started=started, say=say,
+                             blockwise=storage.describe(result.hierarchy) if lazy else None)
         _unchanged(volume.files, read_as)     # else nothing is committed
         done["info"], done["storage"] = info, storage
 
     outputs.commit(write)
     done["storage"].finish()
     return done["info"]
+
+
+def result_to_files(volume, result, out_dir, *, force=False, wait=False,
+                    persistence_plot=False, paraview=None, say=_quiet) -> dict:
+    """Write a `Segmentation` of `volume` already made (by `segment_volume`, or cut
+    again with `Segmentation.recut`) as its output set in `out_dir`: the files, checks
+    and summary `volseg segment` writes for the same cut, nothing recomputed. Returns
+    the summary. (The napari plugin's "write outputs".)"""
+    out_dir = check_out_dir(out_dir)
+    started = time.perf_counter()
+    read_as = _file_states(volume.files)
+    checksum = files_sha256(volume.files)
+    data = volume.data if _is_lazy(volume) else np.asarray(volume)
+    outputs, = output_sets([volume], out_dir, force=force, wait=wait,
+                           persistence_plot=persistence_plot, paraview=paraview)
+    done = {}
+
+    def write(paths):
+        done["info"] = _write_result(paths, volume, result, data, input_range(data), outputs,
+                                     checksum=checksum, requested_regions=result.n_regions,
+                                     started=started, say=say, blockwise=None)
+        _unchanged(volume.files, read_as)
+
+    with outputs:
+        outputs.commit(write)
+    return done["info"]
+
+
+def _write_result(paths, volume, result, data, value_range, outputs, *, checksum, started,
+                  say, blockwise=None, noise=None, seed=0, requested_regions=None) -> dict:
+    """The summary and files of `result` into an output set's staging `paths`."""
+    name = volume.name
+    frame = volume.frame or Frame.from_spacing(result.spacing)
+    say(f"{name}: {result.n_regions} regions{result.mask.phrase()} from "
+        f"{len(result.hierarchy.maxima)} maxima; writing")
+    info = summary(result, name=name, source=volume.path, checksum=checksum,
+                   files=volume.files, frame=frame, noise=noise, seed=seed,
+                   requested_regions=requested_regions)
+    if blockwise is not None:
+        info["blockwise"] = blockwise
+    info["timings_s"]["total"] = round(time.perf_counter() - started, 4)
+    info["outputs"] = {kind: str(path) for kind, path in outputs.targets.items()}
+    warning = degenerate_cut_warning(name, result, info["spread"], data.dtype)
+    if warning:
+        say(warning)
+    write_result_files(paths, result, data, info, frame=frame,
+                       title=result_title(name, result, blockwise=blockwise is not None,
+                                          spread=info["spread"]),
+                       value_range=value_range)
+    return info
 
 
 def _stages_saying_warnings(data, request, storage, name, say, source):

@@ -34,7 +34,7 @@ from .masks import MaskChoice, foreground_mask
 from .morse import MorseHierarchy, check_measure_cut, descending_complex
 
 __all__ = ["Segmentation", "SegmentRequest", "CutRequest", "Storage", "InMemory", "run_stages",
-           "segment_volume", "segment_mesh", "DEFAULT_REGIONS", "DEFAULT_MEASURE",
+           "segment_volume", "segment_mesh", "input_range", "DEFAULT_REGIONS", "DEFAULT_MEASURE",
            "DEFAULT_MIN_COMPONENT", "AUTO_REGION_RANGE", "AUTO_INTEGER_SIGMA",
            "AUTO_NOISE_UNIT", "AUTO_MAX_SIGMA", "auto_smoothing"]
 
@@ -171,6 +171,44 @@ class Segmentation:
                 entry["position"] = self.vertices[top].tolist()
             table.append(entry)
         return table
+
+    def region(self, label: int) -> dict:
+        """Region `label` (1..k) of the cut: its ``size`` (voxels or vertices) and
+        ``volume`` (in world units), its highest maximum (``maximum``: [x, y, z] voxel, or
+        the vertex index), ``curvature_at_maximum``, and that maximum's ``persistence``
+        (inf for the highest maximum of a connected component)."""
+        tops = self._region_tops()
+        if not 1 <= int(label) <= len(tops):
+            raise ValueError(f"`label` must be a region 1..{len(tops)}, got {label}")
+        top = int(tops[int(label) - 1])
+        size = (self.labels == int(label)).sum()
+        size = int(size.compute() if _validate.is_lazy(size) else size)
+        flat = int(self.hierarchy.maxima[top])
+        maximum = (flat if self.vertices is not None
+                   else [int(c) for c in np.unravel_index(flat, self.labels.shape)])
+        unit = float(np.prod(self.spacing)) if self.spacing is not None else 1.0
+        return {"label": int(label), "size": size, "volume": size * unit, "maximum": maximum,
+                "curvature_at_maximum": float(self.hierarchy.values[top]),
+                "persistence": float(self.hierarchy.persistence[top])}
+
+    def recut(self, n_regions: int | str | None = None, *, min_persistence: float | None = None,
+              measure: str | None = None, threshold: float | None = None) -> Segmentation:
+        """The same segmentation cut again: new labels from `hierarchy` (one gather per
+        voxel, nothing recomputed), the curvature and everything else shared.
+
+        The arguments are `segment_volume`'s; `measure` defaults to this cut's (to
+        persistence with `min_persistence`) and the cut keeps its `min_component`.
+        """
+        if measure is None:
+            measure = "persistence" if min_persistence is not None else self.measure
+        cut = CutRequest.checked(min_persistence, n_regions, measure=measure,
+                                 threshold=threshold,
+                                 min_component=self.cut.get("min_component", 0.0))
+        timings = dict(self.timings)
+        with _timed(timings, "recut"):
+            labels, k, record = _cut_of(self.hierarchy, cut)
+        return dataclasses.replace(self, labels=labels, n_regions=k, cut=record,
+                                   timings=timings, **_cut_fields(record))
 
 
 @dataclass(frozen=True)
@@ -348,7 +386,7 @@ def run_stages(data, request: SegmentRequest, storage: Storage | None = None, *,
     (Segmentation, (min, max) of the input's values)
     """
     storage = storage or InMemory()
-    value_range = _value_range(data)                  # one pass, before anything is kept
+    value_range = input_range(data)                  # one pass, before anything is kept
     if not all(np.isfinite(v) for v in value_range):
         raise ValueError(f"{source} holds NaN or infinite values (its range is "
                          f"{value_range[0]} .. {value_range[1]}); replace them first")
@@ -387,19 +425,26 @@ def _morse_and_cut(field, cut: CutRequest, timings, *, mask=None, adjacency=None
         if vertex_weight is not None:
             hierarchy = hierarchy.with_vertex_weight(vertex_weight)
     with _timed(timings, "cut", storage):
-        asked = cut.of(hierarchy)
-        region = hierarchy.region_of_maximum(**asked)
-        labels = hierarchy.relabel(region)     # regions 1..k, 0 outside a mask
-        k = int(region.max()) + 1
+        labels, k, record = _cut_of(hierarchy, cut)
     with _timed(timings, "labels", storage):
         labels = storage.labels(labels, k)
+    return hierarchy, labels, k, record
+
+
+def _cut_of(hierarchy: MorseHierarchy, cut: CutRequest) -> tuple:
+    """(labels 1..k, k, cut record) of one cut of `hierarchy`: lazy labels for a
+    blockwise hierarchy, relabelled block by block."""
+    asked = cut.of(hierarchy)
+    region = hierarchy.region_of_maximum(**asked)
+    labels = hierarchy.relabel(region)     # regions 1..k, 0 outside a mask
+    k = int(region.max()) + 1
     threshold = (float(cut.threshold) if cut.threshold is not None
                  else hierarchy.threshold_for(k, cut.measure, asked["min_component"]))
     record = {"measure": cut.measure, "threshold": cut.threshold,
               "min_persistence": cut.min_persistence, "n_regions": asked["n_regions"],
               "auto": cut.auto, "cut_threshold": threshold,
               "min_component": asked["min_component"]}
-    return hierarchy, labels, k, record
+    return labels, k, record
 
 
 def _cut_fields(record) -> dict:
@@ -450,7 +495,7 @@ def _exact_in_float64(data, value_range) -> tuple:
     return shifted, (0, int(hi) - int(lo))
 
 
-def _value_range(data) -> tuple:
+def input_range(data) -> tuple:
     """(min, max) of the input, in one pass (the value scale and the preview's grey
     scale both read it), before any stage's block hooks exist."""
     if _validate.is_lazy(data):
@@ -475,6 +520,7 @@ def segment_volume(
     min_component: float | None = None,
     smooth: float | None = None,
     boundary: str | None = None,
+    progress=None,
 ) -> Segmentation:
     """Segment a volume by the descending Morse complex of its mean curvature.
 
@@ -527,6 +573,9 @@ def segment_volume(
         no region of `n_regions` (default `DEFAULT_MIN_COMPONENT`; 0 keeps all).
     smooth, boundary
         Deprecated names of `smooth_sigma` and `padding`.
+    progress : callable, optional
+        Called with a line as each stage starts (and the seconds the one before
+        took). An exception it raises stops the run there: how a viewer cancels.
 
     Returns
     -------
@@ -543,7 +592,7 @@ def segment_volume(
         default_spacing=getattr(volume, "spacing", (1.0, 1.0, 1.0)), padding=padding, mask=mask,
         smooth_sigma=smooth_sigma, measure=measure, threshold=threshold,
         min_component=min_component, dtype=data.dtype)
-    return run_stages(data, request)[0]
+    return run_stages(data, request, InMemory(say=progress))[0]
 
 
 def segment_mesh(

@@ -1,0 +1,217 @@
+"""The napari plugin through napari itself: the manifest, the reader's layers, the
+widget's run, the live cut and the output set, against the library and the CLI."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from volseg import segment_volume
+from volseg.datasets import demo_volume
+from volseg.io import Frame, write_volume
+
+WAIT_MS = 240_000
+
+
+def _widget(viewer):
+    from volseg.napari_plugin._widget import SegmentWidget
+
+    widget = SegmentWidget(viewer)
+    viewer.window.add_dock_widget(widget)
+    return widget
+
+
+def _run(qtbot, widget, **settings):
+    for name, value in settings.items():
+        getattr(widget, name).setValue(value) if hasattr(getattr(widget, name), "setValue") \
+            else getattr(widget, name).setCurrentText(value)
+    widget.start()
+    qtbot.waitUntil(lambda: widget.worker is None, timeout=WAIT_MS)
+    assert widget.live.result is not None, widget.status.text()
+    return widget.live.result
+
+
+def test_manifest_names_the_reader_widget_and_sample():
+    import npe2
+
+    manager = npe2.PluginManager.instance()
+    manager.discover()
+    manifest = manager.get_manifest("volseg")
+    commands = {c.id: c.python_name for c in manifest.contributions.commands}
+    for command in commands.values():      # every command resolves to an object
+        module, name = command.split(":")
+        assert hasattr(__import__(module, fromlist=[name]), name), command
+    assert manifest.contributions.readers[0].accepts_directories
+    assert "*_summary.json" in manifest.contributions.readers[0].filename_patterns
+
+
+@pytest.fixture
+def rotated_um_nifti(tmp_path):
+    """The demo volume as a NIfTI in micrometres, rotated and translated."""
+    data = demo_volume(24).astype(np.float32)
+    angle = np.deg2rad(30)
+    affine = np.eye(4)
+    rotation = np.array([[np.cos(angle), -np.sin(angle), 0],
+                         [np.sin(angle), np.cos(angle), 0], [0, 0, 1]])
+    affine[:3, :3] = rotation @ np.diag([0.5, 0.5, 2])
+    affine[:3, 3] = [10, -4, 3]
+    path = tmp_path / "rot.nii.gz"
+    write_volume(path, data, frame=Frame(affine, unit="micrometer"))
+    return path
+
+
+def test_reader_places_the_input_as_its_frame(make_napari_viewer, rotated_um_nifti, tmp_path):
+    viewer = make_napari_viewer()
+    layer, = viewer.open(str(rotated_um_nifti), plugin="volseg")
+    volume = layer.metadata["volseg_volume"]
+    assert layer.data.shape == volume.shape[::-1]           # z, y, x
+    assert np.array_equal(np.asarray(layer.data), np.asarray(volume.data).transpose(2, 1, 0))
+    # A voxel's world position in napari is the frame's, axes reversed.
+    voxel = np.array([3, 5, 7])
+    world = volume.frame.affine @ [*voxel, 1]
+    assert np.allclose(layer.data_to_world(voxel[::-1]), world[:3][::-1])
+    assert [str(u) for u in layer.units] == ["micrometer"] * 3
+    # An axis-aligned input gets scale and translation, no affine.
+    plain = tmp_path / "plain.nii.gz"
+    write_volume(plain, np.zeros((6, 7, 8), np.float32), frame=Frame(
+        np.array([[0.5, 0, 0, 1], [0, 2, 0, 2], [0, 0, 3, 3], [0, 0, 0, 1.0]])))
+    layer, = viewer.open(str(plain), plugin="volseg")
+    assert tuple(layer.scale) == (3, 2, 0.5) and tuple(layer.translate) == (3, 2, 1)
+    assert np.allclose(layer.affine.affine_matrix, np.eye(4))
+
+
+def test_reader_refuses_a_bad_file_in_one_line(tmp_path):
+    from volseg.napari_plugin._reader import read
+
+    bad = tmp_path / "bad.nii.gz"
+    bad.write_bytes(b"\x1f\x8b not really gzip")
+    with pytest.raises(ValueError, match="bad.nii.gz") as err:
+        read(str(bad))
+    assert "\n" not in str(err.value)
+
+
+def test_reader_opens_an_output_set_and_the_ngff_output(make_napari_viewer, tmp_path):
+    from volseg.cli import main
+
+    volume = tmp_path / "blobs.nii.gz"
+    write_volume(volume, demo_volume(32).astype(np.float32), frame=Frame(
+        np.array([[2.0, 0, 0, 5], [0, 2, 0, 6], [0, 0, 2, 7], [0, 0, 0, 1]]), unit="millimeter"))
+    assert main(["segment", str(volume), "--out-dir", str(tmp_path / "out"), "--regions", "6",
+                 "-q"]) == 0
+    viewer = make_napari_viewer()
+    curvature, labels = viewer.open(str(tmp_path / "out" / "blobs_summary.json"),
+                                    plugin="volseg")
+    assert labels._type_string == "labels" and curvature._type_string == "image"
+    import nibabel
+
+    expected = np.asanyarray(nibabel.load(tmp_path / "out" / "blobs_labels.nii.gz").dataobj)
+    assert np.array_equal(np.asarray(labels.data), expected.transpose(2, 1, 0))
+    assert tuple(labels.scale) == (2, 2, 2) and tuple(labels.translate) == (7, 6, 5)
+    curvature_ngff, labels_ngff = viewer.open(
+        str(tmp_path / "out" / "blobs_segmentation.ome.zarr"), plugin="volseg")
+    assert np.array_equal(np.asarray(labels_ngff.data[0] if labels_ngff.multiscale
+                                     else labels_ngff.data), expected.transpose(2, 1, 0))
+    assert tuple(labels_ngff.scale) == (2, 2, 2) and tuple(labels_ngff.translate) == (7, 6, 5)
+
+
+def test_widget_labels_equal_segment_volume_and_the_slider_recuts(make_napari_viewer, qtbot):
+    viewer = make_napari_viewer()
+    data = demo_volume(32)
+    viewer.add_image(data, name="blobs", scale=(1.0, 1.5, 2.0))
+    widget = _widget(viewer)
+    result = _run(qtbot, widget, regions=8)
+    expected = segment_volume(data, spacing=(1.0, 1.5, 2.0), n_regions=8)
+    assert np.array_equal(widget.labels_layer.data, expected.labels)
+    assert np.array_equal(widget.curvature_layer.data, expected.curvature)
+    assert tuple(widget.labels_layer.scale) == (1.0, 1.5, 2.0)
+    assert result.n_regions == 8 and widget.count_slider.value() == 8
+    for k in (3, 12, 5, 1):
+        widget.count_slider.setValue(k)          # as a user moves it
+        assert np.array_equal(widget.labels_layer.data,
+                              expected.hierarchy.segment(**_count_cut(expected, k)))
+        assert widget.count_label.text() == f"{k} regions"
+    # The threshold slider cuts by the measure; the count follows.
+    widget.threshold_slider.setValue(widget.threshold_slider.maximum())
+    assert widget.live.result.n_regions == expected.hierarchy.n_components
+    widget.threshold_slider.setValue(0)
+    assert widget.live.result.n_regions == widget.live.max_regions()
+    # A region's details are the region table's.
+    widget.count_slider.setValue(4)
+    info = widget.show_region(2)
+    table = widget.live.result.region_table()[1]
+    assert info["size"] == table["size"] and info["maximum"] == table["maximum"]
+    assert "region 2:" in widget.region_info.text()
+
+
+def _count_cut(result, k):
+    return {"n_regions": k, "measure": result.measure,
+            "min_component": result.cut["min_component"]}
+
+
+def test_output_button_writes_the_clis_set(make_napari_viewer, qtbot, rotated_um_nifti, tmp_path):
+    import json
+
+    import nibabel
+
+    from volseg.cli import main
+
+    viewer = make_napari_viewer()
+    viewer.open(str(rotated_um_nifti), plugin="volseg")
+    widget = _widget(viewer)
+    _run(qtbot, widget, regions=10)
+    widget.count_slider.setValue(7)
+    widget.out_dir.setText(str(tmp_path / "gui"))
+    (tmp_path / "gui").mkdir()
+    widget._write_clicked()
+    qtbot.waitUntil(lambda: widget.write_button.isEnabled(), timeout=WAIT_MS)
+    assert main(["segment", str(rotated_um_nifti), "--out-dir", str(tmp_path / "cli"),
+                 "--regions", "7", "-q"]) == 0
+    gui, cli = (sorted(p.name for p in (tmp_path / d).iterdir()) for d in ("gui", "cli"))
+    assert gui == cli
+    for name in ("rot_labels.nii.gz", "rot_curvature.nii.gz"):
+        a, b = (nibabel.load(tmp_path / d / name) for d in ("gui", "cli"))
+        assert np.array_equal(np.asanyarray(a.dataobj), np.asanyarray(b.dataobj))
+        assert np.array_equal(a.affine, b.affine) and a.header == b.header
+    summaries = [json.loads((tmp_path / d / "rot_summary.json").read_text())
+                 for d in ("gui", "cli")]
+    for summary in summaries:
+        summary.pop("timings_s"), summary.pop("outputs")
+    assert summaries[0] == summaries[1]
+    # The labels layer shows the cut that was written.
+    written = np.asanyarray(nibabel.load(tmp_path / "gui" / "rot_labels.nii.gz").dataobj)
+    assert np.array_equal(np.asarray(widget.labels_layer.data), written.transpose(2, 1, 0))
+
+
+def test_widget_cancel_stops_the_run_and_a_bad_layer_says_why(make_napari_viewer, qtbot):
+    viewer = make_napari_viewer()
+    viewer.add_image(np.zeros((5, 6)), name="flat2d")
+    widget = _widget(viewer)
+    widget.image.setCurrentText("flat2d")
+    widget.start()
+    assert "3-D volumes" in widget.status.text() and widget.worker is None
+    viewer.add_image(demo_volume(24), name="blobs")
+    widget.image.setCurrentText("blobs")
+    widget.start()
+    widget.cancel()                       # before its first stage starts, or during one
+    qtbot.waitUntil(lambda: widget.worker is None, timeout=WAIT_MS)
+    assert widget.status.text() == "cancelled"
+    assert widget.labels_layer is None
+
+
+def test_widget_segments_a_dask_layer_blockwise(make_napari_viewer, qtbot):
+    import dask.array as da
+
+    viewer = make_napari_viewer()
+    data = demo_volume(24)
+    viewer.add_image(da.from_array(data, chunks=(10, 13, 24)), name="lazy")
+    widget = _widget(viewer)
+    _run(qtbot, widget, regions=6)
+    expected = segment_volume(data, n_regions=6)
+    assert np.array_equal(np.asarray(widget.labels_layer.data), expected.labels)
+    widget.count_slider.setValue(3)
+    assert np.array_equal(np.asarray(widget.labels_layer.data),
+                          expected.hierarchy.segment(**_count_cut(expected, 3)))
+    work = widget.live._work
+    assert work is not None and Path(work).is_dir()
+    widget.close()
+    assert not Path(work).exists()

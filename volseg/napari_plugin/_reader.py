@@ -1,0 +1,137 @@
+"""The napari reader: volseg's output sets, its OME-Zarr output, and every input
+volseg segments, each through volseg's own checked readers (a malformed file is
+refused with its one-line message, as at the command line)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import VolsegError
+from ..outputs import BLOCKWISE_SUFFIXES, NGFF_SUFFIX, OUTPUT_SUFFIXES
+from ._layers import frame_kwargs, to_layer
+
+__all__ = ["napari_get_reader", "read", "demo_layers"]
+
+_SUMMARY = OUTPUT_SUFFIXES["summary"]
+#: The name of the labels image inside volseg's OME-Zarr output.
+NGFF_LABELS = "labels/regions"
+
+
+def napari_get_reader(path):
+    """The reader of `path` (one path, or a list of one), or None when volseg cannot
+    read it (napari then asks the next plugin)."""
+    if isinstance(path, (list, tuple)):
+        if len(path) != 1:
+            return None
+        path = path[0]
+    path = Path(path)
+    if path.name.endswith(_SUMMARY):
+        return read if _is_volseg_summary(path) else None
+    if path.is_dir() and not path.name.lower().endswith(".zarr") and not _tiff_folder(path):
+        return None
+    return read
+
+
+def read(path) -> list[tuple]:
+    """Layer data of `path`: an output set (by its ``_summary.json``): the curvature as
+    an image and the labels as labels, both placed by the input's frame; volseg's
+    OME-Zarr output: the same, as multiscale layers; any input: one image layer that
+    carries its `Volume` (what the segmentation widget segments)."""
+    path = Path(path[0] if isinstance(path, (list, tuple)) else path)
+    if path.name.endswith(_SUMMARY):
+        return _output_set(path)
+    if path.name.endswith(NGFF_SUFFIX) and (path / NGFF_LABELS).is_dir():
+        return _ngff_output(path)
+    return [_input_layer(_load(path))]
+
+
+def demo_layers() -> list[tuple]:
+    """The sample data: volseg's built-in demo volume."""
+    from ..datasets import demo_volume
+    from ..io import Volume
+
+    return [_input_layer(Volume(demo_volume(), name="demo", source="built-in synthetic"))]
+
+
+def _load(path: Path, **options):
+    from ..blockwise.engine import default_memory_limit
+    from ..files import load_for_budget
+
+    try:
+        return load_for_budget(str(path), default_memory_limit(), **options)
+    except VolsegError as err:
+        raise ValueError(str(err)) from None     # napari shows a reader's error as one line
+
+
+def _input_layer(volume) -> tuple:
+    return (to_layer(volume.data),
+            {"name": volume.name, "metadata": {"volseg_volume": volume},
+             **frame_kwargs(volume.frame)}, "image")
+
+
+def _is_volseg_summary(path: Path) -> bool:
+    try:
+        with open(path, encoding="utf-8") as file:
+            info = json.load(file)
+    except (OSError, ValueError):
+        return False
+    return isinstance(info, dict) and "volseg_version" in info and "n_regions" in info
+
+
+def _tiff_folder(path: Path) -> bool:
+    return any(p.suffix.lower() in (".tif", ".tiff") for p in path.iterdir())
+
+
+def _output_set(summary: Path) -> list[tuple]:
+    """The curvature and labels beside `summary`: the Zarr stores of a blockwise run,
+    else the NIfTI files."""
+    stem = summary.name[: -len(_SUMMARY)]
+    layers = []
+    for kind, layer_type in (("curvature", "image"), ("labels", "labels")):
+        zarr = summary.parent / (stem + BLOCKWISE_SUFFIXES[kind])
+        nifti = summary.parent / (stem + OUTPUT_SUFFIXES[kind])
+        volume = _load(zarr if zarr.exists() else nifti)
+        layers.append(_result_layer(to_layer(volume.data), f"{stem} {kind}", layer_type,
+                                    frame_kwargs(volume.frame)))
+    return layers
+
+
+def _ngff_output(path: Path) -> list[tuple]:
+    """volseg's OME-Zarr output as multiscale layers (every level read lazily)."""
+    stem = path.name[: -len(NGFF_SUFFIX)]
+    layers = []
+    for sub, kind, layer_type in (("", "curvature", "image"), (NGFF_LABELS, "labels", "labels")):
+        levels = [_load(path / sub, ome_level=level) for level in range(_levels(path / sub))]
+        data = [to_layer(level.data) for level in levels]
+        layers.append(_result_layer(data if len(data) > 1 else data[0], f"{stem} {kind}",
+                                    layer_type, frame_kwargs(levels[0].frame)))
+    return layers
+
+
+def _levels(image: Path) -> int:
+    """How many resolution levels an OME-Zarr image lists (1 if it lists none: the
+    reader of level 0 then names the problem)."""
+    try:
+        with open(image / "zarr.json", encoding="utf-8") as file:
+            attributes = json.load(file).get("attributes", {})
+        return max(1, len(attributes["ome"]["multiscales"][0]["datasets"]))
+    except (OSError, ValueError, KeyError, IndexError, TypeError, AttributeError):
+        return 1
+
+
+#: The curvature's contrast limits are percentiles of at most about this many voxels.
+CONTRAST_SAMPLE = 64**3
+
+
+def _result_layer(data, name: str, layer_type: str, placement: dict) -> tuple:
+    kwargs = {"name": name, **placement}
+    if layer_type == "image":
+        kwargs["colormap"] = "magma"
+        sample = data[-1] if isinstance(data, list) else data
+        step = max(1, int(np.ceil((np.prod(sample.shape) / CONTRAST_SAMPLE) ** (1 / 3))))
+        low, high = np.percentile(np.asarray(sample[::step, ::step, ::step]), [1, 99])
+        kwargs["contrast_limits"] = (float(low), float(high)) if high > low else None
+    return (data, kwargs, layer_type)

@@ -1,0 +1,371 @@
+"""The dock widget: segment an image layer, then choose the cut by looking.
+
+- parameters (operator, smoothing, mask rule, measure, regions) and a run in a napari
+  thread worker, with per-stage progress and a Cancel that stops it at the next stage;
+- the live cut: a region-count slider and a threshold slider (log scale) that
+  relabel the labels layer from the hierarchy (`LiveSegmentation.cut`: no
+  recomputation), the curve of the measure beside them with the cut marked;
+- a click on a region shows its size, its maximum and its persistence;
+- "Write output set" writes the current cut as ``volseg segment`` would.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from matplotlib.backends.backend_qtagg import FigureCanvasQTAgg
+from matplotlib.figure import Figure
+from napari.layers import Image
+from napari.qt.threading import create_worker
+from qtpy.QtCore import QObject, Qt, Signal
+from qtpy.QtWidgets import (
+    QCheckBox,
+    QComboBox,
+    QDoubleSpinBox,
+    QFileDialog,
+    QFormLayout,
+    QGroupBox,
+    QHBoxLayout,
+    QLabel,
+    QLineEdit,
+    QProgressBar,
+    QPushButton,
+    QSlider,
+    QSpinBox,
+    QVBoxLayout,
+    QWidget,
+)
+
+from ..curvature import OPERATORS
+from ..errors import VolsegError
+from ..morse import MEASURES
+from ..segment import DEFAULT_MEASURE, DEFAULT_REGIONS
+from ._layers import layer_volume
+from ._live import Cancelled, LiveSegmentation, Options
+
+__all__ = ["SegmentWidget"]
+
+#: Stages a run reports (`volseg.segment.run_stages`): the progress bar's steps.
+STAGES = ("curvature", "morse", "cut", "labels")
+#: Positions of the threshold slider (log scale between the smallest and largest
+#: extinction).
+THRESHOLD_STEPS = 1000
+
+
+def _guarded(function, *args, **kwargs) -> tuple:
+    """(result, None), or (None, the error) for what a user can act on: a cancel, a
+    refused input or output (volseg's one-line errors), a full disk. napari shows any
+    other exception with its traceback: a bug."""
+    try:
+        return function(*args, **kwargs), None
+    except (Cancelled, VolsegError, OSError) as err:
+        return None, err
+
+
+class _Bridge(QObject):
+    """Carries a worker thread's progress lines to the GUI thread (queued signal)."""
+
+    said = Signal(str)
+
+
+class SegmentWidget(QWidget):
+    """Curvature segmentation of the selected image layer, with a live cut."""
+
+    def __init__(self, napari_viewer):
+        super().__init__()
+        self.viewer = napari_viewer
+        self.live: LiveSegmentation | None = None
+        self.labels_layer = None
+        self.curvature_layer = None
+        self.worker = None
+        self._cancel = False
+        self._bridge = _Bridge()
+        self._bridge.said.connect(self._progress)
+        self._build()
+        self.viewer.layers.events.inserted.connect(self._refresh_layers)
+        self.viewer.layers.events.removed.connect(self._refresh_layers)
+        self._refresh_layers()
+
+    # Layout ----------------------------------------------------------------------
+
+    def _build(self):
+        layout = QVBoxLayout(self)
+        form = QFormLayout()
+        self.image = QComboBox()
+        self.operator = QComboBox()
+        self.operator.addItems(list(OPERATORS))
+        self.smooth = QDoubleSpinBox()
+        self.smooth.setRange(-1.0, 10.0)
+        self.smooth.setSingleStep(0.5)
+        self.smooth.setSpecialValueText("auto")      # shown at the minimum, -1
+        self.smooth.setValue(-1.0)
+        self.mask = QLineEdit("auto")
+        self.mask.setToolTip("auto, none, nonzero, otsu or value>T")
+        self.measure = QComboBox()
+        self.measure.addItems(list(MEASURES))
+        self.measure.setCurrentText(DEFAULT_MEASURE)
+        self.regions = QSpinBox()
+        self.regions.setRange(1, 1_000_000)
+        self.regions.setValue(DEFAULT_REGIONS)
+        for label, widget in (("image", self.image), ("operator", self.operator),
+                              ("smoothing sigma", self.smooth), ("mask", self.mask),
+                              ("measure", self.measure), ("regions", self.regions)):
+            form.addRow(label, widget)
+        layout.addLayout(form)
+
+        buttons = QHBoxLayout()
+        self.run_button = QPushButton("Segment")
+        self.run_button.clicked.connect(self.start)
+        self.cancel_button = QPushButton("Cancel")
+        self.cancel_button.setEnabled(False)
+        self.cancel_button.clicked.connect(self.cancel)
+        buttons.addWidget(self.run_button)
+        buttons.addWidget(self.cancel_button)
+        layout.addLayout(buttons)
+        self.progress = QProgressBar()
+        self.progress.setRange(0, len(STAGES))
+        self.status = QLabel("")
+        self.status.setWordWrap(True)
+        layout.addWidget(self.progress)
+        layout.addWidget(self.status)
+
+        cut = QGroupBox("cut")
+        cut_layout = QFormLayout(cut)
+        self.count_slider = QSlider(Qt.Orientation.Horizontal)
+        self.count_slider.valueChanged.connect(self._count_moved)
+        self.count_label = QLabel("")
+        self.threshold_slider = QSlider(Qt.Orientation.Horizontal)
+        self.threshold_slider.setRange(0, THRESHOLD_STEPS)
+        self.threshold_slider.valueChanged.connect(self._threshold_moved)
+        self.threshold_label = QLabel("")
+        cut_layout.addRow("regions", self.count_slider)
+        cut_layout.addRow("", self.count_label)
+        cut_layout.addRow("threshold", self.threshold_slider)
+        cut_layout.addRow("", self.threshold_label)
+        self.figure = Figure(figsize=(3.2, 2.2), tight_layout=True)
+        self.canvas = FigureCanvasQTAgg(self.figure)
+        self.canvas.setMinimumHeight(180)
+        cut_layout.addRow(self.canvas)
+        self.region_info = QLabel("click a region")
+        self.region_info.setWordWrap(True)
+        cut_layout.addRow(self.region_info)
+        layout.addWidget(cut)
+
+        out = QHBoxLayout()
+        self.out_dir = QLineEdit()
+        self.out_dir.setPlaceholderText("output folder")
+        browse = QPushButton("...")
+        browse.clicked.connect(self._browse)
+        self.force = QCheckBox("overwrite")
+        self.write_button = QPushButton("Write output set")
+        self.write_button.clicked.connect(self._write_clicked)
+        for widget in (self.out_dir, browse, self.force, self.write_button):
+            out.addWidget(widget)
+        layout.addLayout(out)
+        layout.addStretch()
+        self._cut_enabled(False)
+
+    def _refresh_layers(self, event=None):
+        current = self.image.currentText()
+        names = [layer.name for layer in self.viewer.layers if isinstance(layer, Image)]
+        self.image.clear()
+        self.image.addItems(names)
+        if current in names:
+            self.image.setCurrentText(current)
+
+    def _cut_enabled(self, enabled: bool):
+        for widget in (self.count_slider, self.threshold_slider, self.write_button):
+            widget.setEnabled(enabled)
+
+    # The run ---------------------------------------------------------------------
+
+    def options(self) -> Options:
+        sigma = self.smooth.value()
+        return Options(operator=self.operator.currentText(),
+                       smooth_sigma=None if sigma < 0 else sigma, mask=self.mask.text().strip(),
+                       measure=self.measure.currentText(), n_regions=self.regions.value())
+
+    def start(self):
+        """Segment the chosen image layer in a thread worker."""
+        name = self.image.currentText()
+        if not name:
+            self.status.setText("no image layer to segment")
+            return
+        try:
+            source = layer_volume(self.viewer.layers[name])
+        except ValueError as err:
+            self.status.setText(str(err))
+            return
+        if self.live is not None:
+            self.live.close()
+        self.live = LiveSegmentation(source, self.options())
+        self._cancel = False
+        self.progress.setValue(0)
+        self.status.setText(f"segmenting {name} ...")
+        self.run_button.setEnabled(False)
+        self.cancel_button.setEnabled(True)
+        self._cut_enabled(False)
+        self.worker = create_worker(_guarded, self.live.run, progress=self._bridge.said.emit,
+                                    cancelled=lambda: self._cancel)
+        self.worker.returned.connect(self._finished)
+        self.worker.finished.connect(self._idle)
+        self.worker.start()
+
+    def cancel(self):
+        """Stop the run at the start of its next stage."""
+        self._cancel = True
+        self.status.setText("cancelling at the next stage ...")
+
+    def _progress(self, message: str):
+        done = [stage for stage in STAGES if message.endswith(stage)]
+        if done:
+            self.progress.setValue(STAGES.index(done[0]))
+        self.status.setText(message)
+
+    def _idle(self):
+        self.run_button.setEnabled(True)
+        self.cancel_button.setEnabled(False)
+        self.worker = None
+
+    def _failed(self, err):
+        self.progress.setValue(0)
+        self.status.setText("cancelled" if isinstance(err, Cancelled) else str(err))
+
+    def _finished(self, outcome):
+        result, err = outcome
+        if err is not None:
+            self._failed(err)
+            return
+        live = self.live
+        self.progress.setValue(len(STAGES))
+        kwargs = live.source.layer_kwargs
+        name = live.volume.name
+        self._replace_layer("curvature_layer", live.curvature(), f"{name} curvature", "image",
+                            {**kwargs, "colormap": "magma"})
+        self._replace_layer("labels_layer", live.labels(), f"{name} labels", "labels", kwargs)
+        self.labels_layer.mouse_drag_callbacks.append(self._clicked)
+        self._cut_enabled(True)
+        self.count_slider.blockSignals(True)
+        self.count_slider.setRange(1, live.max_regions())
+        self.count_slider.blockSignals(False)
+        self._show_cut()
+        self.status.setText(f"{result.n_regions} regions from {len(result.hierarchy.maxima)} "
+                            f"maxima in {sum(result.timings.values()):.1f} s; move the sliders "
+                            "to cut again")
+
+    def _replace_layer(self, attribute, data, name, kind, kwargs):
+        old = getattr(self, attribute)
+        if old is not None and old in self.viewer.layers:
+            self.viewer.layers.remove(old)
+        add = self.viewer.add_image if kind == "image" else self.viewer.add_labels
+        setattr(self, attribute, add(data, name=name, **kwargs))
+
+    # The live cut ------------------------------------------------------------------
+
+    def set_regions(self, n_regions: int):
+        """Cut into `n_regions` (what moving the region slider does)."""
+        self.labels_layer.data = self.live.cut(n_regions=int(n_regions))
+        self._show_cut()
+
+    def set_threshold(self, threshold: float):
+        """Cut at `threshold` of the measure (what moving the threshold slider does)."""
+        self.labels_layer.data = self.live.cut(threshold=float(threshold))
+        self._show_cut()
+
+    def _count_moved(self, value: int):
+        if self.live is not None and self.live.result is not None:
+            self.set_regions(value)
+
+    def _threshold_moved(self, position: int):
+        if self.live is not None and self.live.result is not None:
+            self.set_threshold(self._threshold_at(position))
+
+    def _bounds(self) -> tuple:
+        thresholds, _ = self.live.curve()
+        if not len(thresholds):
+            return 1.0, 1.0
+        return float(thresholds[-1]), float(thresholds[0]) * 1.01
+
+    def _threshold_at(self, position: int) -> float:
+        low, high = self._bounds()
+        return low * (high / low) ** (position / THRESHOLD_STEPS)
+
+    def _show_cut(self):
+        """Sliders, labels and the curve at the current cut (signals held)."""
+        result = self.live.result
+        low, high = self._bounds()
+        threshold = float(result.threshold)
+        position = (0 if high <= low or threshold <= low else
+                    int(round(THRESHOLD_STEPS * np.log(threshold / low) / np.log(high / low))))
+        for slider, value in ((self.count_slider, result.n_regions),
+                              (self.threshold_slider, min(position, THRESHOLD_STEPS))):
+            slider.blockSignals(True)
+            slider.setValue(int(value))
+            slider.blockSignals(False)
+        self.count_label.setText(f"{result.n_regions} regions")
+        self.threshold_label.setText(f"{result.measure} {threshold:.4g}")
+        self._draw_curve()
+
+    def _draw_curve(self):
+        result = self.live.result
+        thresholds, counts = self.live.curve()
+        self.figure.clear()
+        axes = self.figure.add_subplot()
+        if len(thresholds):
+            axes.step(thresholds, counts, where="post", color="0.2", linewidth=1)
+            axes.set_xscale("log")
+            axes.set_yscale("log")
+        axes.axvline(result.threshold, color="tab:red", linewidth=1)
+        axes.plot([result.threshold], [result.n_regions], "o", color="tab:red")
+        axes.set_xlabel(f"{result.measure} threshold", fontsize=8)
+        axes.set_ylabel("regions", fontsize=8)
+        axes.tick_params(labelsize=7)
+        self.canvas.draw_idle()
+
+    def _clicked(self, layer, event):
+        value = layer.get_value(event.position, view_direction=event.view_direction,
+                                dims_displayed=event.dims_displayed, world=True)
+        if value:
+            self.show_region(int(value))
+
+    def show_region(self, label: int) -> dict:
+        """Show region `label`'s size, maximum and persistence; returns them."""
+        info = self.live.region(label)
+        self.region_info.setText(
+            f"region {info['label']}: {info['size']:,} voxels ({info['volume']:.4g} in world "
+            f"units); maximum at voxel {tuple(info['maximum'])}, curvature "
+            f"{info['curvature_at_maximum']:.4g}; persistence {info['persistence']:.4g}")
+        return info
+
+    # Output ------------------------------------------------------------------------
+
+    def _browse(self):
+        folder = QFileDialog.getExistingDirectory(self, "Output folder")
+        if folder:
+            self.out_dir.setText(folder)
+
+    def _write_clicked(self):
+        folder = self.out_dir.text().strip()
+        if not folder:
+            self.status.setText("choose an output folder first")
+            return
+        self.write_button.setEnabled(False)
+        self.worker = create_worker(_guarded, self.live.write, folder,
+                                    force=self.force.isChecked(), say=self._bridge.said.emit)
+        self.worker.returned.connect(self._written)
+        self.worker.finished.connect(lambda: self.write_button.setEnabled(True))
+        self.worker.start()
+
+    def _written(self, outcome):
+        info, err = outcome
+        if err is not None:
+            self._failed(err)
+        else:
+            names = ", ".join(Path(path).name for path in info["outputs"].values())
+            self.status.setText(f"wrote {names}")
+
+    def closeEvent(self, event):      # noqa: N802 (Qt's name)
+        if self.live is not None:
+            self.live.close()
+        super().closeEvent(event)
