@@ -50,6 +50,7 @@ class LiveSegmentation:
         self.source, self.options = source, options
         self.result: Segmentation | None = None
         self._work: Path | None = None
+        self._curve = None
 
     @property
     def volume(self):
@@ -104,10 +105,12 @@ class LiveSegmentation:
         """(thresholds, counts): the region count (``counts[i]``) of the cut just below
         each extinction of the measure (``thresholds``, decreasing, positive)."""
         result = self.result
-        extinction, components = result.hierarchy.curve(result.measure,
-                                                        result.cut.get("min_component", 0.0))
-        extinction = np.sort(extinction[np.isfinite(extinction) & (extinction > 0)])[::-1]
-        return extinction, components + np.arange(1, len(extinction) + 1)
+        key = (id(result.hierarchy), result.measure, result.cut.get("min_component", 0.0))
+        if self._curve is None or self._curve[0] != key:
+            extinction, components = result.hierarchy.curve(*key[1:])
+            extinction = np.sort(extinction[np.isfinite(extinction) & (extinction > 0)])[::-1]
+            self._curve = key, (extinction, components + np.arange(1, len(extinction) + 1))
+        return self._curve[1]
 
     def max_regions(self) -> int:
         """The most regions a cut can have (every maximum kept)."""

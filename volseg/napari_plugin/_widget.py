@@ -48,9 +48,9 @@ __all__ = ["SegmentWidget"]
 
 #: Stages a run reports (`volseg.segment.run_stages`): the progress bar's steps.
 STAGES = ("curvature", "morse", "cut", "labels")
-#: Positions of the threshold slider (log scale between the smallest and largest
-#: extinction).
-THRESHOLD_STEPS = 1000
+#: Positions of the sliders: log scales of the region count (1 to every maximum) and
+#: of the threshold (the smallest to the largest extinction).
+SLIDER_STEPS = 1000
 
 
 def _guarded(function, *args, **kwargs) -> tuple:
@@ -91,6 +91,15 @@ class SegmentWidget(QWidget):
 
     def _build(self):
         layout = QVBoxLayout(self)
+        layout.addLayout(self._parameters())
+        layout.addLayout(self._run_controls())
+        layout.addWidget(self.status)
+        layout.addWidget(self._cut_controls())
+        layout.addLayout(self._output_controls())
+        layout.addStretch()
+        self._cut_enabled(False)
+
+    def _parameters(self) -> QFormLayout:
         form = QFormLayout()
         self.image = QComboBox()
         self.operator = QComboBox()
@@ -112,8 +121,9 @@ class SegmentWidget(QWidget):
                               ("smoothing sigma", self.smooth), ("mask", self.mask),
                               ("measure", self.measure), ("regions", self.regions)):
             form.addRow(label, widget)
-        layout.addLayout(form)
+        return form
 
+    def _run_controls(self) -> QVBoxLayout:
         buttons = QHBoxLayout()
         self.run_button = QPushButton("Segment")
         self.run_button.clicked.connect(self.start)
@@ -122,36 +132,50 @@ class SegmentWidget(QWidget):
         self.cancel_button.clicked.connect(self.cancel)
         buttons.addWidget(self.run_button)
         buttons.addWidget(self.cancel_button)
-        layout.addLayout(buttons)
         self.progress = QProgressBar()
         self.progress.setRange(0, len(STAGES))
         self.status = QLabel("")
         self.status.setWordWrap(True)
-        layout.addWidget(self.progress)
-        layout.addWidget(self.status)
+        column = QVBoxLayout()
+        column.addLayout(buttons)
+        column.addWidget(self.progress)
+        return column
 
+    def _cut_controls(self) -> QGroupBox:
         cut = QGroupBox("cut")
         cut_layout = QFormLayout(cut)
+        # Counts on a log scale (2 and 20 as far apart as 200 and 2,000), the exact
+        # count in the box beside it.
         self.count_slider = QSlider(Qt.Orientation.Horizontal)
+        self.count_slider.setRange(0, SLIDER_STEPS)
         self.count_slider.valueChanged.connect(self._count_moved)
+        self.count_box = QSpinBox()
+        self.count_box.setRange(1, 1)
+        self.count_box.valueChanged.connect(self._count_typed)
         self.count_label = QLabel("")
         self.threshold_slider = QSlider(Qt.Orientation.Horizontal)
-        self.threshold_slider.setRange(0, THRESHOLD_STEPS)
+        self.threshold_slider.setRange(0, SLIDER_STEPS)
         self.threshold_slider.valueChanged.connect(self._threshold_moved)
         self.threshold_label = QLabel("")
-        cut_layout.addRow("regions", self.count_slider)
+        counts = QHBoxLayout()
+        counts.addWidget(self.count_slider)
+        counts.addWidget(self.count_box)
+        cut_layout.addRow("regions", counts)
         cut_layout.addRow("", self.count_label)
         cut_layout.addRow("threshold", self.threshold_slider)
         cut_layout.addRow("", self.threshold_label)
         self.figure = Figure(figsize=(3.2, 2.2), tight_layout=True)
         self.canvas = FigureCanvasQTAgg(self.figure)
         self.canvas.setMinimumHeight(180)
+        self.canvas.mpl_connect("draw_event", self._captured)
+        self._marker = None
         cut_layout.addRow(self.canvas)
         self.region_info = QLabel("click a region")
         self.region_info.setWordWrap(True)
         cut_layout.addRow(self.region_info)
-        layout.addWidget(cut)
+        return cut
 
+    def _output_controls(self) -> QHBoxLayout:
         out = QHBoxLayout()
         self.out_dir = QLineEdit()
         self.out_dir.setPlaceholderText("output folder")
@@ -162,9 +186,7 @@ class SegmentWidget(QWidget):
         self.write_button.clicked.connect(self._write_clicked)
         for widget in (self.out_dir, browse, self.force, self.write_button):
             out.addWidget(widget)
-        layout.addLayout(out)
-        layout.addStretch()
-        self._cut_enabled(False)
+        return out
 
     def _refresh_layers(self, event=None):
         current = self.image.currentText()
@@ -175,7 +197,8 @@ class SegmentWidget(QWidget):
             self.image.setCurrentText(current)
 
     def _cut_enabled(self, enabled: bool):
-        for widget in (self.count_slider, self.threshold_slider, self.write_button):
+        for widget in (self.count_slider, self.count_box, self.threshold_slider,
+                       self.write_button):
             widget.setEnabled(enabled)
 
     # The run ---------------------------------------------------------------------
@@ -246,9 +269,10 @@ class SegmentWidget(QWidget):
         self._replace_layer("labels_layer", live.labels(), f"{name} labels", "labels", kwargs)
         self.labels_layer.mouse_drag_callbacks.append(self._clicked)
         self._cut_enabled(True)
-        self.count_slider.blockSignals(True)
-        self.count_slider.setRange(1, live.max_regions())
-        self.count_slider.blockSignals(False)
+        self.count_box.blockSignals(True)
+        self.count_box.setRange(1, live.max_regions())
+        self.count_box.blockSignals(False)
+        self._draw_curve()
         self._show_cut()
         self.status.setText(f"{result.n_regions} regions from {len(result.hierarchy.maxima)} "
                             f"maxima in {sum(result.timings.values()):.1f} s; move the sliders "
@@ -273,9 +297,22 @@ class SegmentWidget(QWidget):
         self.labels_layer.data = self.live.cut(threshold=float(threshold))
         self._show_cut()
 
-    def _count_moved(self, value: int):
+    def _count_moved(self, position: int):
+        if self.live is not None and self.live.result is not None:
+            self.set_regions(self._count_at(position))
+
+    def _count_typed(self, value: int):
         if self.live is not None and self.live.result is not None:
             self.set_regions(value)
+
+    def _count_at(self, position: int) -> int:
+        """The region count at a position of the (log-scale) region slider."""
+        top = self.live.max_regions()
+        return int(min(max(round(top ** (position / SLIDER_STEPS)), 1), top))
+
+    def _count_position(self, count: int) -> int:
+        top = self.live.max_regions()
+        return 0 if top <= 1 else int(round(SLIDER_STEPS * np.log(count) / np.log(top)))
 
     def _threshold_moved(self, position: int):
         if self.live is not None and self.live.result is not None:
@@ -289,7 +326,7 @@ class SegmentWidget(QWidget):
 
     def _threshold_at(self, position: int) -> float:
         low, high = self._bounds()
-        return low * (high / low) ** (position / THRESHOLD_STEPS)
+        return low * (high / low) ** (position / SLIDER_STEPS)
 
     def _show_cut(self):
         """Sliders, labels and the curve at the current cut (signals held)."""
@@ -297,31 +334,53 @@ class SegmentWidget(QWidget):
         low, high = self._bounds()
         threshold = float(result.threshold)
         position = (0 if high <= low or threshold <= low else
-                    int(round(THRESHOLD_STEPS * np.log(threshold / low) / np.log(high / low))))
-        for slider, value in ((self.count_slider, result.n_regions),
-                              (self.threshold_slider, min(position, THRESHOLD_STEPS))):
+                    int(round(SLIDER_STEPS * np.log(threshold / low) / np.log(high / low))))
+        for slider, value in ((self.count_slider, self._count_position(result.n_regions)),
+                              (self.count_box, result.n_regions),
+                              (self.threshold_slider, min(position, SLIDER_STEPS))):
             slider.blockSignals(True)
             slider.setValue(int(value))
             slider.blockSignals(False)
         self.count_label.setText(f"{result.n_regions} regions")
         self.threshold_label.setText(f"{result.measure} {threshold:.4g}")
-        self._draw_curve()
+        self._mark_cut()
 
     def _draw_curve(self):
-        result = self.live.result
+        """The measure's curve, drawn once per run; the cut's marker is blitted over it
+        (`_mark_cut`), so a slider step redraws two artists, not the figure."""
         thresholds, counts = self.live.curve()
         self.figure.clear()
-        axes = self.figure.add_subplot()
+        axes = self.axes = self.figure.add_subplot()
         if len(thresholds):
             axes.step(thresholds, counts, where="post", color="0.2", linewidth=1)
             axes.set_xscale("log")
             axes.set_yscale("log")
-        axes.axvline(result.threshold, color="tab:red", linewidth=1)
-        axes.plot([result.threshold], [result.n_regions], "o", color="tab:red")
-        axes.set_xlabel(f"{result.measure} threshold", fontsize=8)
+        axes.set_xlabel(f"{self.live.result.measure} threshold", fontsize=8)
         axes.set_ylabel("regions", fontsize=8)
         axes.tick_params(labelsize=7)
-        self.canvas.draw_idle()
+        self._marker = (axes.axvline(1.0, color="tab:red", linewidth=1, animated=True),
+                        axes.plot([1.0], [1.0], "o", color="tab:red", animated=True)[0])
+        self._background = None
+        self.canvas.draw()
+
+    def _captured(self, event=None):
+        """After every full draw (a resize too): keep the plot without the marker."""
+        if getattr(self, "_marker", None) is not None:
+            self._background = self.canvas.copy_from_bbox(self.axes.bbox)
+            self._mark_cut()
+
+    def _mark_cut(self):
+        if self._background is None or self.live is None or self.live.result is None:
+            return
+        result = self.live.result
+        line, dot = self._marker
+        where = max(float(result.threshold), self._bounds()[0])
+        line.set_xdata([where, where])
+        dot.set_data([where], [result.n_regions])
+        self.canvas.restore_region(self._background)
+        self.axes.draw_artist(line)
+        self.axes.draw_artist(dot)
+        self.canvas.blit(self.axes.bbox)
 
     def _clicked(self, layer, event):
         value = layer.get_value(event.position, view_direction=event.view_direction,

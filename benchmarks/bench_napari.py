@@ -1,0 +1,124 @@
+"""The napari plugin's live cut and first run, side by side (issue 29).
+
+    xvfb-run -a python benchmarks/bench_napari.py [--size 256] [--steps 20]
+
+On one `--size`^3 volume (a smooth random field: a realistic number of maxima, about
+one per 10^3 voxels; or `--input FILE`):
+
+1. the first segmentation inside napari (the widget's run in its thread worker, from
+   the click to the layers added) against ``volseg segment`` on the same volume saved
+   as .npy (a fresh process, its wall time and its own stage timings), and against
+   `segment_volume` in this process (the same work without napari);
+2. one slider step: from the region slider's value change to the labels layer
+   holding the new cut and napari's events processed, over `--steps` region counts
+   spread over the hierarchy (median and worst, milliseconds); the goal is under
+   150 ms at 256^3.
+
+It needs a display: run it under ``xvfb-run -a`` (Debian's xvfb) on a machine
+without one.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+
+def _field(size: int) -> np.ndarray:
+    from scipy.ndimage import gaussian_filter
+
+    rng = np.random.default_rng(7)
+    field = gaussian_filter(rng.standard_normal((size,) * 3, dtype=np.float32), 3.0)
+    return ((field - field.min()) / np.ptp(field) * 255).astype(np.uint8)   # an 8-bit scan
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--size", type=int, default=256)
+    parser.add_argument("--steps", type=int, default=20)
+    parser.add_argument("--input", help="a volume file instead of the random field")
+    parser.add_argument("--screenshot", help="where to save the viewer's screenshot")
+    args = parser.parse_args()
+
+    import napari
+    from qtpy.QtWidgets import QApplication
+
+    from volseg import segment_volume
+    from volseg.files import load_volume
+    from volseg.napari_plugin._widget import SegmentWidget
+
+    work = Path(tempfile.mkdtemp(prefix="volseg-bench-napari-"))
+    if args.input:
+        path = Path(args.input)
+    else:
+        path = work / f"field{args.size}.npy"
+        np.save(path, _field(args.size))
+    volume = load_volume(str(path))
+    voxels = int(np.prod(volume.shape))
+    print(f"volume {path.name}: {'x'.join(map(str, volume.shape))} ({voxels / 1e6:.1f} M voxels)")
+
+    started = time.perf_counter()
+    cli = subprocess.run([sys.executable, "-m", "volseg", "segment", str(path), "-o",
+                          str(work / "cli"), "-q", "--json", "--no-vti"],
+                         capture_output=True, text=True)
+    cli_seconds = time.perf_counter() - started
+    if cli.returncode:
+        raise SystemExit(cli.stderr)
+    cli_stages = json.loads(cli.stdout)["timings_s"]
+
+    started = time.perf_counter()
+    library = segment_volume(volume)
+    library_seconds = time.perf_counter() - started
+
+    viewer = napari.Viewer(show=True)
+    viewer.open(str(path), plugin="volseg")
+    widget = SegmentWidget(viewer)
+    viewer.window.add_dock_widget(widget, name="Curvature segmentation")
+    viewer.window.resize(1500, 950)
+    app = QApplication.instance()
+    started = time.perf_counter()
+    widget.start()
+    while widget.worker is not None:
+        app.processEvents()
+        time.sleep(0.005)
+    napari_seconds = time.perf_counter() - started
+    if widget.live.result is None:
+        raise SystemExit(f"the widget's run failed: {widget.status.text()}")
+    assert np.array_equal(widget.live.result.labels, library.labels)
+
+    top = widget.live.max_regions()
+    counts = np.unique(np.geomspace(2, max(top, 2), args.steps).astype(int))
+    steps = []
+    for k in counts:
+        started = time.perf_counter()
+        widget.count_box.setValue(int(k))
+        app.processEvents()
+        steps.append((time.perf_counter() - started) * 1000)
+        assert widget.live.result.n_regions == k or k > top
+    steps = np.array(steps)
+
+    print(f"first segmentation: napari widget {napari_seconds:.1f} s, segment_volume "
+          f"{library_seconds:.1f} s in this process, volseg segment {cli_seconds:.1f} s "
+          f"(a fresh process; its stages {json.dumps(cli_stages)})")
+    print(f"slider step over {len(steps)} counts 2..{top}: median {np.median(steps):.0f} ms, "
+          f"worst {steps.max():.0f} ms (goal: under 150 ms)")
+    widget.count_box.setValue(30)
+    widget.show_region(1)
+    viewer.dims.set_point(0, volume.shape[2] // 2)
+    app.processEvents()
+    shot = Path(args.screenshot) if args.screenshot else work / "napari_widget.png"
+    viewer.screenshot(str(shot), canvas_only=False)
+    print(f"screenshot: {shot}")
+    viewer.close()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
