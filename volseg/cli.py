@@ -133,6 +133,10 @@ def _add_segment_io(seg):
                      help="the channel of an OME-Zarr image with several (its 'c' axis)")
     seg.add_argument("--ome-level", type=int, metavar="L",
                      help="the resolution level of an OME-Zarr image (default 0, the full one)")
+    seg.add_argument("--labels-into-input", nargs="?", const="volseg", metavar="NAME",
+                     help="also add the labels to an OME-Zarr input image, as its NGFF labels "
+                     "image labels/NAME (default volseg), where napari-ome-zarr and NGFF "
+                     "viewers find them (the input is otherwise never written)")
     seg.add_argument("--json", action="store_true", help="print the summaries as JSON on stdout")
     seg.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
 
@@ -290,7 +294,8 @@ def _cmd_segment(args):
         operator=normalize_operator(args.operator), n_regions=args.regions,
         min_persistence=args.min_persistence, value_scale=args.value_scale, noise=args.noise,
         seed=args.seed, mask=mask, smooth_sigma=args.smooth_sigma, measure=args.measure,
-        threshold=args.threshold, min_component=args.min_component)
+        threshold=args.threshold, min_component=args.min_component,
+        labels_into_input=args.labels_into_input, ome_level=args.ome_level)
     if args.json:
         print(_json.dumps(summaries if len(summaries) > 1 else summaries[0], indent=2))
     return 0

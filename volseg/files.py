@@ -194,6 +194,7 @@ def segment_files(volumes, out_dir, *, force=False, wait=False, persistence_plot
         The summaries, in input order.
     """
     _refuse_noise_when_lazy(volumes, options.get("noise"))
+    _check_labels_into_input(volumes, options.get("labels_into_input"), force)
     out_dir = check_out_dir(out_dir)
     note = first_run_note([*curvature_kernels(), *morse_kernels()])
     if note:
@@ -220,15 +221,38 @@ def segment_files(volumes, out_dir, *, force=False, wait=False, persistence_plot
     return summaries
 
 
+def _check_labels_into_input(volumes, name, force) -> None:
+    """`labels_into_input` only for OME-Zarr inputs, refused before anything is
+    computed (a name that is not a plain group name, an existing labels image without
+    `force`)."""
+    if name is None:
+        return
+    from .io.ngff import is_ome_image
+
+    if not name or not all(c.isalnum() or c in "-_." for c in name) or name.startswith("."):
+        raise UsageError(f"--labels-into-input: {name!r} is not a labels image name (letters, "
+                         "digits, '-', '_', '.')")
+    for volume in volumes:
+        if volume.path is None or not is_ome_image(volume.path):
+            raise UsageError(f"--labels-into-input: {volume.path or volume.name} is not an "
+                             "OME-Zarr image (labels are added only to one)")
+        if (Path(volume.path) / "labels" / name).exists() and not force:
+            raise UsageError(f"--labels-into-input: {Path(volume.path) / 'labels' / name} "
+                             "exists; give --force to replace it")
+
+
 def segment_to_files(volume, outputs, *, operator="weighted", n_regions=None,
                      min_persistence=None, value_scale=None, noise=None, seed=0, mask=None,
                      smooth_sigma=None, padding="linear", measure=None, threshold=None,
-                     min_component=None, engine=None, say=_quiet) -> dict:
+                     min_component=None, labels_into_input=None, ome_level=None, engine=None,
+                     say=_quiet) -> dict:
     """Segment `volume` and write its output set (an entered `OutputSet` named by
     `output_names`); returns the summary. A lazily read volume (its data a Dask
     array) takes the blockwise path: each stage stored in the set's staging files and
     a work folder that lets a killed run resume (`volseg.blockwise`). `noise`: percent
     Gaussian noise of the value range (`volseg.noise.add_value_noise`), in memory only.
+    `labels_into_input`: also add the committed labels to the OME-Zarr input image (of
+    level `ome_level`) as ``labels/<labels_into_input>`` (`volseg.io.write_labels_into`).
     """
     started = time.perf_counter()
     lazy = _is_lazy(volume)
@@ -270,7 +294,19 @@ def segment_to_files(volume, outputs, *, operator="weighted", n_regions=None,
 
     outputs.commit(write)
     done["storage"].finish()
+    if labels_into_input is not None:
+        _labels_into_input(volume, outputs, labels_into_input, ome_level, say)
     return done["info"]
+
+
+def _labels_into_input(volume, outputs, name, level, say) -> None:
+    """The committed labels (read back from the set) added to the OME-Zarr input."""
+    from .io import read_volume
+    from .io.ngff import write_labels_into
+
+    labels = read_volume(outputs.targets["labels"]).data
+    target = write_labels_into(volume.path, labels, name=name, level=level or 0, force=True)
+    say(f"{volume.name}: added the labels to the input image as {target}")
 
 
 def result_to_files(volume, result, out_dir, *, force=False, wait=False,

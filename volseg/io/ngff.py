@@ -15,14 +15,17 @@ aligned (voxel sizes and the origin); the NIfTI and ``.vti`` outputs keep the ro
 
 from __future__ import annotations
 
+import os
+import shutil
 import warnings
 from pathlib import Path
 
 import numpy as np
 
+from ..errors import OutputError, VolumeFileError
 from .volume import Frame
 
-__all__ = ["write_ngff", "pyramid_levels", "NGFF_CHUNK"]
+__all__ = ["write_ngff", "write_labels_into", "is_ome_image", "pyramid_levels", "NGFF_CHUNK"]
 
 #: Chunk edge of every level (64^3: 256 KB of uint8 labels, 1 MB of float32).
 NGFF_CHUNK = 64
@@ -92,3 +95,84 @@ def write_ngff(path, labels, curvature, frame: Frame) -> Path:
 def _transforms(scale, translation) -> list:
     return [{"type": "scale", "scale": [float(s) for s in scale]},
             {"type": "translation", "translation": [float(t) for t in translation]}]
+
+
+def is_ome_image(path) -> bool:
+    """A folder holding an OME-Zarr (0.4 or 0.5) image: a group with ``multiscales``."""
+    import zarr
+
+    try:
+        group = zarr.open_group(str(path), mode="r")
+    except Exception:      # not a store, not a group: not an OME-Zarr image
+        return False
+    attrs = group.attrs.asdict()
+    return bool(attrs.get("multiscales") or (attrs.get("ome") or {}).get("multiscales"))
+
+
+def write_labels_into(image, labels, *, name: str = "volseg", level: int = 0,
+                      force: bool = False) -> Path:
+    """Add `labels` ((X, Y, Z) numpy or Dask, the grid of the image's level `level`) to
+    the OME-Zarr image `image` as its NGFF labels image ``labels/<name>``: the image's
+    own NGFF version and axis order, level `level`'s scale and translation, a nearest
+    pyramid; listed in ``labels/``'s metadata, where napari-ome-zarr and every NGFF
+    viewer look for an image's labels.
+
+    The pyramid is written into a hidden staging group beside it and renamed into place
+    (one rename on a local filesystem), then listed; an existing ``labels/<name>`` is
+    refused unless `force` (then replaced). Images with axes other than three spatial
+    ones (channels, time) are refused: their labels would need those axes too.
+    """
+    import dask.array as da
+    import zarr
+
+    from .zarr_store import _ome_level
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)
+        from ome_zarr.format import FormatV04, FormatV05
+        from ome_zarr.writer import add_metadata, get_metadata, write_multiscale
+
+    image = Path(image)
+    group = zarr.open_group(str(image), mode="r+")
+    array, axes, factors, origin, units = _ome_level(group, image, level)
+    if sorted(axes) != ["x", "y", "z"]:
+        raise VolumeFileError(f"{image}: OME-Zarr image of axes {axes}: labels can be added "
+                              "only to an image of three spatial axes (x, y, z)")
+    order = ["xyz".index(a) for a in axes]             # the image's axes from x, y, z
+    shape = tuple(labels.shape[i] for i in order)
+    if shape != tuple(array.shape):
+        raise VolumeFileError(f"{image}: level {level} has shape {tuple(array.shape)}, the "
+                              f"labels {shape} in its axis order")
+    fmt = FormatV05() if "ome" in group.attrs.asdict() else FormatV04()
+    root = image / "labels"
+    target, staging = root / name, root / f".{name}.volseg-staging"
+    if target.exists() and not force:
+        raise OutputError(f"{target} exists: give --force to replace it")
+    labels_group = group.require_group("labels")
+    if staging.exists():
+        shutil.rmtree(staging)        # a killed run's
+    levels = [labels if hasattr(labels, "dask") else
+              da.from_array(np.asarray(labels), chunks=NGFF_CHUNK)]
+    levels[0] = levels[0].transpose(*order).rechunk(NGFF_CHUNK)
+    for _ in range(pyramid_levels(shape)):
+        levels.append(levels[-1][::2, ::2, ::2].rechunk(NGFF_CHUNK))
+    axes_meta = [{"name": a, "type": "space", **({"unit": u} if u else {})}
+                 for a, u in zip(axes, units, strict=True)]
+    transforms = [_transforms(np.array(factors) * 2**i, origin) for i in range(len(levels))]
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", "The 'coordinate_transformations' argument",
+                                DeprecationWarning)
+        write_multiscale(levels, labels_group.create_group(staging.name), fmt=fmt,
+                         axes=axes_meta, coordinate_transformations=transforms, name=name)
+    staged = zarr.open_group(str(staging), mode="r+")
+    add_metadata(staged, {"image-label": {"version": fmt.version,
+                                          "source": {"image": "../../"}}}, fmt=fmt)
+    old = root / f".{name}.volseg-old"
+    if target.exists():
+        os.rename(target, old)
+    os.rename(staging, target)
+    shutil.rmtree(old, ignore_errors=True)
+    listed = list(get_metadata(labels_group).get("labels", []))
+    if name not in listed:
+        add_metadata(labels_group, {"labels": [*listed, name]}, fmt=fmt)
+    return target

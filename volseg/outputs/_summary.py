@@ -70,10 +70,15 @@ LISTED_PERSISTENCES = 200
 
 def input_files(paths) -> list[Path]:
     """Every file of an input's `paths`: a Zarr store is a folder, its files in name
-    order."""
+    order, but for an OME-Zarr image's ``labels/`` (derived images, never read as the
+    image: adding labels, ``--labels-into-input``, leaves its checksum as it was)."""
     files = []
     for path in map(Path, paths):
-        files += sorted(p for p in path.rglob("*") if p.is_file()) if path.is_dir() else [path]
+        if not path.is_dir():
+            files.append(path)
+            continue
+        files += sorted(p for p in path.rglob("*") if p.is_file()
+                        and p.relative_to(path).parts[0] != "labels")
     return files
 
 

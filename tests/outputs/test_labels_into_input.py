@@ -1,0 +1,108 @@
+"""``--labels-into-input``: the labels added to an OME-Zarr input as its NGFF labels
+image ``labels/<name>``, in the input's own NGFF version (0.4 and 0.5) and axis order,
+where ome-zarr-py and napari-ome-zarr find an image's labels; refused clearly for
+anything else; the input image itself untouched."""
+
+import json
+import warnings
+
+import nibabel
+import numpy as np
+import pytest
+
+from volseg.cli import main
+from volseg.datasets import demo_volume
+
+SCALE, TRANSLATION = [2.0, 1.0, 0.5], [5.0, 6.0, 7.0]
+
+
+def _ome_image(path, version: str):
+    import zarr
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)
+        from ome_zarr.format import FormatV04, FormatV05
+        from ome_zarr.writer import write_multiscale
+
+        fmt = FormatV04() if version == "0.4" else FormatV05()
+        root = zarr.open_group(str(path), mode="w", zarr_format=fmt.zarr_format)
+        write_multiscale([demo_volume(40).transpose(2, 1, 0)], root, fmt=fmt,
+                         axes=[{"name": a, "type": "space", "unit": "micrometer"} for a in "zyx"],
+                         coordinate_transformations=[[{"type": "scale", "scale": SCALE},
+                                                      {"type": "translation",
+                                                       "translation": TRANSLATION}]])
+    return path
+
+
+def _labels_node(image):
+    """ome-zarr-py's node of ``labels/volseg``, found by walking the image as its reader
+    does (image, then its labels)."""
+    from ome_zarr.io import parse_url
+    from ome_zarr.reader import Reader
+
+    found = [node for node in Reader(parse_url(str(image)))()
+             if "labels/volseg" in str(node).split(" ")[0]]
+    assert len(found) == 1, [str(node) for node in Reader(parse_url(str(image)))()]
+    return found[0]
+
+
+def _image_bytes(path) -> dict:
+    return {str(p.relative_to(path)): p.read_bytes() for p in sorted(path.rglob("*"))
+            if p.is_file() and p.relative_to(path).parts[0] != "labels"}
+
+
+@pytest.mark.parametrize("version", ["0.4", "0.5"])
+def test_labels_land_in_the_input_image_where_readers_find_them(tmp_path, version):
+    image = _ome_image(tmp_path / "cells.ome.zarr", version)
+    before = _image_bytes(image)
+    assert main(["segment", str(image), "-o", str(tmp_path / "out"), "--labels-into-input",
+                 "--regions", "6", "-q"]) == 0
+    assert _image_bytes(image) == before                   # the image is as it was
+    nifti = np.asarray(nibabel.load(tmp_path / "out" / "cells_labels.nii.gz").dataobj)
+
+    labels = _labels_node(image)
+    assert [type(s).__name__ for s in labels.specs] == ["Label", "Multiscales"]
+    assert [a["name"] for a in labels.metadata["axes"]] == ["z", "y", "x"]
+    scale, translation = labels.metadata["coordinateTransformations"][0]
+    assert scale["scale"] == SCALE and translation["translation"] == TRANSLATION
+    np.testing.assert_array_equal(np.asarray(labels.data[0]), nifti.transpose(2, 1, 0))
+
+    # napari-ome-zarr opens the image with our labels as a labels layer beside it.
+    napari_ome_zarr = pytest.importorskip("napari_ome_zarr")
+    layers = [(kind, data) for data, _, kind in
+              napari_ome_zarr.napari_get_reader(str(image))(str(image))]
+    kinds = [kind for kind, _ in layers]
+    assert kinds.count("labels") == 1 and kinds.count("image") == 1
+    data = dict(layers)["labels"]
+    np.testing.assert_array_equal(np.asarray(data[0] if isinstance(data, list) else data),
+                                  nifti.transpose(2, 1, 0))
+
+    # The input's checksum ignores its labels: a second run reads the same input.
+    assert main(["segment", str(image), "-o", str(tmp_path / "again"), "--labels-into-input",
+                 "--regions", "4", "--force", "-q"]) == 0
+    first, second = (json.loads((tmp_path / d / "cells_summary.json").read_text())
+                     for d in ("out", "again"))
+    assert first["input_sha256"] == second["input_sha256"]
+    again = np.asarray(nibabel.load(tmp_path / "again" / "cells_labels.nii.gz").dataobj)
+    labels = _labels_node(image)
+    np.testing.assert_array_equal(np.asarray(labels.data[0]), again.transpose(2, 1, 0))
+    assert not any(p.name.startswith(".volseg") for p in (image / "labels").iterdir())
+
+
+def test_labels_into_input_refusals_come_before_any_output(tmp_path, capsys):
+    image = _ome_image(tmp_path / "cells.ome.zarr", "0.5")
+    nifti = tmp_path / "plain.npy"
+    np.save(nifti, demo_volume(16))
+    cases = [([str(nifti)], "is not an OME-Zarr image"),
+             ([str(image), "--labels-into-input", "../up"], "is not a labels image name")]
+    for extra, message in cases:
+        inputs, options = extra[:1], extra[1:] or ["--labels-into-input"]
+        assert main(["segment", *inputs, "-o", str(tmp_path / "out"), *options, "-q"]) == 2
+        assert message in capsys.readouterr().err
+    assert main(["segment", str(image), "-o", str(tmp_path / "out"), "--labels-into-input",
+                 "-q"]) == 0
+    assert main(["segment", str(image), "-o", str(tmp_path / "out2"), "--labels-into-input",
+                 "-q"]) == 2
+    err = capsys.readouterr().err
+    assert "labels/volseg exists; give --force" in err and str(image) in err
+    assert not (tmp_path / "out2").exists() or not any((tmp_path / "out2").iterdir())
