@@ -245,3 +245,33 @@ def test_integers_beyond_2_to_53_segment_as_their_offsets(dtype, offset, lazy):
     got = segment_volume(da.from_array(shifted, chunks=5) if lazy else shifted, n_regions=4)
     np.testing.assert_array_equal(np.asarray(got.labels), expected.labels)
     np.testing.assert_allclose(np.asarray(got.curvature), expected.curvature, atol=1e-12)
+
+
+def test_recut_equals_a_fresh_segmentation_and_reuses_a_buffer():
+    """`Segmentation.recut` is the cut `segment_volume` makes with the same count or
+    threshold (labels, count, cut record, threshold), nothing recomputed; with `out`
+    the labels are written into it; `region` agrees with the region table."""
+    from volseg.datasets import demo_volume
+
+    data = demo_volume(28)
+    base = segment_volume(data, n_regions=9)
+    buffer = base.labels.copy()
+    for k in (2, 5, 9, 14):
+        fresh = segment_volume(data, n_regions=k)
+        cut = base.recut(k)
+        assert np.array_equal(cut.labels, fresh.labels) and cut.n_regions == fresh.n_regions
+        assert cut.cut == fresh.cut and cut.threshold == fresh.threshold
+        into = base.recut(k, out=buffer)
+        assert into.labels is buffer and np.array_equal(buffer, fresh.labels)
+        by_threshold = base.recut(threshold=cut.threshold)
+        assert np.array_equal(by_threshold.labels, fresh.labels)
+        table = fresh.region_table()
+        for label in (1, k):
+            region = cut.region(label)
+            assert region["size"] == table[label - 1]["size"]
+            assert region["maximum"] == table[label - 1]["maximum"]
+    assert base.region(1)["persistence"] == np.inf
+    with pytest.raises(ValueError, match="region 1..9"):
+        base.region(10)
+    with pytest.raises(ValueError, match="`out`"):
+        base.recut(3, out=np.zeros(5, np.int32))

@@ -192,12 +192,15 @@ class Segmentation:
                 "persistence": float(self.hierarchy.persistence[top])}
 
     def recut(self, n_regions: int | str | None = None, *, min_persistence: float | None = None,
-              measure: str | None = None, threshold: float | None = None) -> Segmentation:
+              measure: str | None = None, threshold: float | None = None,
+              out=None) -> Segmentation:
         """The same segmentation cut again: new labels from `hierarchy` (one gather per
         voxel, nothing recomputed), the curvature and everything else shared.
 
         The arguments are `segment_volume`'s; `measure` defaults to this cut's (to
         persistence with `min_persistence`) and the cut keeps its `min_component`.
+        `out`: an int32 array of the labels' shape to write the labels into (in-memory
+        results; a viewer reuses its buffer rather than allocating one per cut).
         """
         if measure is None:
             measure = "persistence" if min_persistence is not None else self.measure
@@ -206,7 +209,7 @@ class Segmentation:
                                  min_component=self.cut.get("min_component", 0.0))
         timings = dict(self.timings)
         with _timed(timings, "recut"):
-            labels, k, record = _cut_of(self.hierarchy, cut)
+            labels, k, record = _cut_of(self.hierarchy, cut, out=out)
         return dataclasses.replace(self, labels=labels, n_regions=k, cut=record,
                                    timings=timings, **_cut_fields(record))
 
@@ -431,12 +434,12 @@ def _morse_and_cut(field, cut: CutRequest, timings, *, mask=None, adjacency=None
     return hierarchy, labels, k, record
 
 
-def _cut_of(hierarchy: MorseHierarchy, cut: CutRequest) -> tuple:
+def _cut_of(hierarchy: MorseHierarchy, cut: CutRequest, out=None) -> tuple:
     """(labels 1..k, k, cut record) of one cut of `hierarchy`: lazy labels for a
-    blockwise hierarchy, relabelled block by block."""
+    blockwise hierarchy, relabelled block by block; into `out` when given."""
     asked = cut.of(hierarchy)
     region = hierarchy.region_of_maximum(**asked)
-    labels = hierarchy.relabel(region)     # regions 1..k, 0 outside a mask
+    labels = hierarchy.relabel(region, out=out)     # regions 1..k, 0 outside a mask
     k = int(region.max()) + 1
     threshold = (float(cut.threshold) if cut.threshold is not None
                  else hierarchy.threshold_for(k, cut.measure, asked["min_component"]))

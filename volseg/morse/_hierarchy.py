@@ -349,20 +349,30 @@ class MorseHierarchy:
                                                    threshold=threshold,
                                                    min_component=min_component))
 
-    def relabel(self, region):
+    def relabel(self, region, out=None):
         """Labels 1..k of every vertex from the region index of each maximum (the
         result of `region_of_maximum`), 0 outside the mask: what `segment` returns,
-        for a caller that needs the regions too."""
-        if type(self.cells).__module__.startswith("dask."):   # blockwise: relabel per block
-            import dask
+        for a caller that needs the regions too. `out`: an int32 array of `shape` to
+        write them into (numpy cells only; a viewer's live cut reuses its buffer)."""
+        lazy = type(self.cells).__module__.startswith("dask.")
+        if out is not None and (lazy or out.shape != self.cells.shape or out.dtype != region.dtype
+                                or not out.flags.c_contiguous):
+            raise ValueError(f"`out` must be a C-contiguous {region.dtype} array of the cells' "
+                             f"shape {self.cells.shape}, for cells in memory")
+        if not lazy:
+            table = _with_outside(region, self.mask)
+            out = np.empty(self.cells.shape, table.dtype) if out is None else out
+            cells = np.ascontiguousarray(self.cells)
+            _kernels.take(table, cells.reshape(-1), out.reshape(-1))
+            return out
+        import dask
 
-            # The table as one shared task: a distributed scheduler sends it to each
-            # worker once, not inside every block's task.
-            table = dask.delayed(_with_outside(region, self.mask), pure=True)
-            return self.cells.map_blocks(lambda cells, table: table[cells], table,
-                                         dtype=region.dtype,
-                                         meta=np.empty((0,) * self.cells.ndim, region.dtype))
-        return _with_outside(region, self.mask)[self.cells]
+        # Blockwise, block by block. The table as one shared task: a distributed
+        # scheduler sends it to each worker once, not inside every block's task.
+        table = dask.delayed(_with_outside(region, self.mask), pure=True)
+        return self.cells.map_blocks(lambda cells, table: table[cells], table,
+                                     dtype=region.dtype,
+                                     meta=np.empty((0,) * self.cells.ndim, region.dtype))
 
     def region_adjacency(self, labels=None, **cut):
         """The regions of a cut as a networkx graph.

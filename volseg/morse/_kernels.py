@@ -68,6 +68,17 @@ def relabel(vertices, cell, ids):
         cell[v] = ids[cell[v]]
 
 
+@numba.njit(cache=True, parallel=True)
+def take(table, cells, out):
+    """out[i] = table[cells[i]], a negative cell counted from the table's end (-1: its
+    last entry): numpy's ``take`` on every core (a cut of 256^3 cells: 45 ms on one,
+    about half on two)."""
+    n = len(table)
+    for i in numba.prange(len(cells)):
+        c = cells[i]
+        out[i] = table[c if c >= 0 else n + c]
+
+
 @numba.njit(cache=True, nogil=True)
 def regions_of_cut(young, target, merged, region):
     """region[m] for each maximum m of a cut: the events with `merged` join the young

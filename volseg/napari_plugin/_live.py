@@ -10,6 +10,7 @@ recomputed, one gather per voxel.
 
 from __future__ import annotations
 
+import dataclasses
 import shutil
 import tempfile
 from dataclasses import dataclass
@@ -89,10 +90,21 @@ class LiveSegmentation:
 
     def cut(self, n_regions: int | None = None, threshold: float | None = None):
         """Cut again into `n_regions`, or at `threshold` of the measure; returns the
-        labels as the layer shows them."""
+        labels as the layer shows them. In memory, every cut is written into the first
+        cut's array (no 4 bytes per voxel allocated per slider step): the layer's data
+        stays the same object, and `snapshot` gives a copy that later cuts leave alone."""
+        labels = self.result.labels
+        reuse = isinstance(labels, np.ndarray) and labels.dtype == np.int32
         self.result = self.result.recut(n_regions, threshold=threshold,
-                                        measure=self.result.measure)
+                                        measure=self.result.measure,
+                                        out=labels if reuse else None)
         return self.labels()
+
+    def snapshot(self) -> Segmentation:
+        """The current cut with labels of its own (for a writer in another thread)."""
+        labels = self.result.labels
+        return dataclasses.replace(self.result, labels=labels.copy()
+                                   if isinstance(labels, np.ndarray) else labels)
 
     def labels(self):
         """The current cut's labels as layer data."""
@@ -120,12 +132,13 @@ class LiveSegmentation:
     def region(self, label: int) -> dict:
         return self.result.region(label)
 
-    def write(self, folder, *, force=False, say=None) -> dict:
-        """The current cut as the output set ``volseg segment`` writes (same files,
-        same checks); returns its summary."""
+    def write(self, folder, *, result: Segmentation | None = None, force=False,
+              say=None) -> dict:
+        """A cut (default the current one) as the output set ``volseg segment``
+        writes (same files, same checks); returns its summary."""
         from ..files import result_to_files
 
-        return result_to_files(self.volume, self.result, folder, force=force,
+        return result_to_files(self.volume, result or self.snapshot(), folder, force=force,
                                say=say or (lambda message: None))
 
     def close(self) -> None:

@@ -289,12 +289,19 @@ class SegmentWidget(QWidget):
 
     def set_regions(self, n_regions: int):
         """Cut into `n_regions` (what moving the region slider does)."""
-        self.labels_layer.data = self.live.cut(n_regions=int(n_regions))
-        self._show_cut()
+        self._show_labels(self.live.cut(n_regions=int(n_regions)))
 
     def set_threshold(self, threshold: float):
         """Cut at `threshold` of the measure (what moving the threshold slider does)."""
-        self.labels_layer.data = self.live.cut(threshold=float(threshold))
+        self._show_labels(self.live.cut(threshold=float(threshold)))
+
+    def _show_labels(self, labels):
+        layer = self.labels_layer
+        if isinstance(labels, np.ndarray) and isinstance(layer.data, np.ndarray) and \
+                np.may_share_memory(labels, layer.data):
+            layer.refresh()          # the cut was written into the layer's own array
+        else:
+            layer.data = labels
         self._show_cut()
 
     def _count_moved(self, position: int):
@@ -410,8 +417,10 @@ class SegmentWidget(QWidget):
             self.status.setText("choose an output folder first")
             return
         self.write_button.setEnabled(False)
+        # The cut as it is now: the sliders may move while the set is written.
         self.worker = create_worker(_guarded, self.live.write, folder,
-                                    force=self.force.isChecked(), say=self._bridge.said.emit)
+                                    result=self.live.snapshot(), force=self.force.isChecked(),
+                                    say=self._bridge.said.emit)
         self.worker.returned.connect(self._written)
         self.worker.finished.connect(lambda: self.write_button.setEnabled(True))
         self.worker.start()
