@@ -154,6 +154,9 @@ def test_widget_labels_equal_segment_volume_and_the_slider_recuts(make_napari_vi
     table = widget.live.result.region_table()[1]
     assert info["size"] == table["size"] and info["maximum"] == table["maximum"]
     assert "region 2:" in widget.region_info.text()
+    # Shown in the layer's own index, where napari's status bar puts the cursor.
+    assert widget.labels_layer.data[info["layer_index"]] == 2
+    assert widget.live.result.labels[tuple(info["maximum"])] == 2
 
 
 def _count_cut(result, k):
@@ -190,6 +193,12 @@ def test_output_button_writes_the_clis_set(make_napari_viewer, qtbot, rotated_um
     for summary in summaries:
         summary.pop("timings_s"), summary.pop("outputs")
     assert summaries[0] == summaries[1]
+    # A region's maximum is given in the layer's z, y, x index and world position.
+    info = widget.show_region(1)
+    assert info["layer_index"] == tuple(info["maximum"][::-1])
+    assert widget.labels_layer.data[info["layer_index"]] == 1
+    np.testing.assert_allclose(widget.labels_layer.data_to_world(info["layer_index"]),
+                               info["world"])
     # The labels layer shows the cut that was written.
     written = np.asanyarray(nibabel.load(tmp_path / "gui" / "rot_labels.nii.gz").dataobj)
     assert np.array_equal(np.asarray(widget.labels_layer.data), written.transpose(2, 1, 0))

@@ -72,6 +72,14 @@ class LayerVolume:
         """A result array ([x, y, z] of the volume) as data of a layer over the image."""
         return to_layer(array) if self.transposed else array
 
+    def place(self, voxel) -> tuple:
+        """(the layer's index, the world position) of a volume voxel, both in the
+        layer's axis order (what napari's status bar shows)."""
+        world = (self.volume.frame.affine @ [*voxel, 1.0])[:3]
+        if self.transposed:
+            return tuple(int(v) for v in voxel[::-1]), tuple(float(w) for w in world[::-1])
+        return tuple(int(v) for v in voxel), tuple(float(w) for w in world)
+
 
 def _transform_kwargs(layer) -> dict:
     kwargs = {"scale": tuple(layer.scale), "translate": tuple(layer.translate),

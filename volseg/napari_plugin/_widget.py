@@ -398,11 +398,14 @@ class SegmentWidget(QWidget):
     def show_region(self, label: int) -> dict:
         """Show region `label`'s size, maximum and persistence; returns them."""
         info = self.live.region(label)
+        index, world = self.live.source.place(info["maximum"])
+        unit = self.live.volume.frame.unit
         self.region_info.setText(
-            f"region {info['label']}: {info['size']:,} voxels ({info['volume']:.4g} in world "
-            f"units); maximum at voxel {tuple(info['maximum'])}, curvature "
-            f"{info['curvature_at_maximum']:.4g}; persistence {info['persistence']:.4g}")
-        return info
+            f"region {info['label']}: {info['size']:,} voxels ({info['volume']:.4g} "
+            f"{unit + '^3' if unit else 'in world units'}); highest maximum at "
+            f"{index} (world {', '.join(f'{w:.4g}' for w in world)}), curvature "
+            f"{info['curvature_at_maximum']:.4g}, persistence {info['persistence']:.4g}")
+        return {**info, "layer_index": index, "world": world}
 
     # Output ------------------------------------------------------------------------
 
