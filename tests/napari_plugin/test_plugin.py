@@ -237,3 +237,30 @@ def test_widget_segments_a_dask_layer_blockwise(make_napari_viewer, qtbot):
     assert work is not None and Path(work).is_dir()
     widget.close()
     assert not Path(work).exists()
+
+
+def test_sample_data_and_a_click_on_a_region(make_napari_viewer, qtbot):
+    from types import SimpleNamespace
+
+    viewer = make_napari_viewer()
+    layer, = viewer.open_sample("volseg", "demo")
+    assert layer.data.shape == (48, 48, 48) and "volseg_volume" in layer.metadata
+    widget = _widget(viewer)
+    _run(qtbot, widget, regions=5)
+    labels = widget.labels_layer
+    where = tuple(int(i) for i in np.argwhere(np.asarray(labels.data) == 3)[0])
+    event = SimpleNamespace(position=labels.data_to_world(where), view_direction=None,
+                            dims_displayed=[1, 2])
+    widget._clicked(labels, event)       # what napari calls on a mouse press on the layer
+    assert widget.region_info.text().startswith("region 3:")
+    assert _clicked_twice_is_harmless(widget, labels)
+
+
+def _clicked_twice_is_harmless(widget, labels):
+    """A press outside every region (label 0, or off the volume) changes nothing."""
+    from types import SimpleNamespace
+
+    before = widget.region_info.text()
+    widget._clicked(labels, SimpleNamespace(position=(-50.0, -50.0, -50.0), view_direction=None,
+                                            dims_displayed=[1, 2]))
+    return widget.region_info.text() == before
