@@ -16,7 +16,8 @@ coordinates, so no full array is ever built), then runs, each in its own process
   dask.distributed cluster of that many worker processes).
 
 It prints wall time, the peak memory of the whole process tree (RSS summed over the
-process and its children, sampled every 0.1 s with psutil), the maxima and region
+process and its children, sampled every 0.1 s with psutil) and of the client process
+alone (with ``local``, the workers are its children), the maxima and region
 counts, and whether the blockwise labels equal the in-memory ones. ``--smooth``
 passes ``--smooth SIGMA`` to every run (the 8-bit staircase of a slowly varying
 field makes a maximum of the curvature every 15 voxels or so at 1024^3).
@@ -85,7 +86,8 @@ def write_inputs(folder: Path, n: int, chunks: int, npy: bool):
 
 
 def run(argv, env=None, cwd=None) -> dict:
-    """Wall time and peak RSS of the process tree of `argv`."""
+    """Wall time, the peak RSS of the process tree of `argv` and of its own process
+    alone (the client, with ``--scheduler local``: the workers are its children)."""
     import psutil
 
     # The child's output goes to files: a pipe nobody reads while polling would stall
@@ -94,11 +96,12 @@ def run(argv, env=None, cwd=None) -> dict:
         start = time.perf_counter()
         process = psutil.Popen(argv, env={**os.environ, **(env or {})}, stdout=out, stderr=err,
                                text=True, cwd=cwd)
-        peak = 0
+        peak = client = 0
         while process.poll() is None:
             try:
                 tree = [process, *process.children(recursive=True)]
                 peak = max(peak, sum(p.memory_info().rss for p in tree if p.is_running()))
+                client = max(client, process.memory_info().rss)
             except psutil.Error:
                 pass
             time.sleep(0.1)
@@ -106,7 +109,8 @@ def run(argv, env=None, cwd=None) -> dict:
         out.seek(0), err.seek(0)
         if process.returncode:
             raise RuntimeError(f"{' '.join(argv)} failed: {err.read().strip()[-500:]}")
-        return {"seconds": seconds, "peak_gb": peak / 2**30, "stdout": out.read()}
+        return {"seconds": seconds, "peak_gb": peak / 2**30, "client_gb": client / 2**30,
+                "stdout": out.read()}
 
 
 def labels_of(folder: Path, stem: str):
@@ -183,13 +187,16 @@ def _main(args, trees) -> int:
                     old = best[key]
                     row["runs"] = old["runs"]
                     row["peak_gb"] = max(old["peak_gb"], row["peak_gb"])
+                    row["client_gb"] = max(old["client_gb"], row["client_gb"])
                     row["same_labels"] = None if same is None else same and old["same_labels"]
                     if old["seconds"] <= row["seconds"]:
-                        row = {**old, **{k: row[k] for k in ("peak_gb", "same_labels")}}
+                        row = {**old, **{k: row[k] for k in ("peak_gb", "client_gb",
+                                                             "same_labels")}}
                 row["runs"] = [*row["runs"], round(result["seconds"], 1)]
                 best[key] = row
                 print(f"{n}^3 {path}, workers {workers}, run {repeat + 1}: "
-                      f"{result['seconds']:.1f} s, peak {result['peak_gb']:.2f} GB, "
+                      f"{result['seconds']:.1f} s, peak {result['peak_gb']:.2f} GB "
+                      f"(client {result['client_gb']:.2f} GB), "
                       f"same labels as in memory: {same}", flush=True)
         rows += best.values()
         by_workers = {w: r["seconds"] for (p, w), r in best.items()
@@ -208,12 +215,13 @@ def _main(args, trees) -> int:
                   f"({seconds:.1f} s / {base:.1f} s, fastest runs)", flush=True)
     smoothed = f", smooth {args.smooth:g}" if args.smooth else ""
     print("\n| size | path | workers | wall s (fastest; every run) | peak GB (all processes) "
-          "| maxima | regions | same labels |")
-    print("| --- | --- | --- | --- | --- | --- | --- | --- |")
+          "| client GB | maxima | regions | same labels |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
     for r in rows:
         same = "" if r["same_labels"] is None else r["same_labels"]
         print(f"| {r['size']}^3{smoothed} | {r['path']} | {r['workers']} | {r['seconds']:.1f} "
-              f"({', '.join(map(str, r['runs']))}) | {r['peak_gb']:.2f} | {r['maxima']} "
+              f"({', '.join(map(str, r['runs']))}) | {r['peak_gb']:.2f} "
+              f"| {r['client_gb']:.2f} | {r['maxima']} "
               f"| {r['regions']} | {same} |")
     return 0
 

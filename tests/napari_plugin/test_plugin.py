@@ -218,6 +218,11 @@ def test_widget_cancel_stops_the_run_and_a_bad_layer_says_why(make_napari_viewer
     qtbot.waitUntil(lambda: widget.worker is None, timeout=WAIT_MS)
     assert widget.status.text() == "cancelled"
     assert widget.labels_layer is None
+    # A parameter volseg refuses is one status line, not a traceback dialog.
+    widget.mask.setText("value>banana")
+    widget.start()
+    qtbot.waitUntil(lambda: widget.worker is None, timeout=WAIT_MS)
+    assert "banana" in widget.status.text() and widget.labels_layer is None
 
 
 def test_widget_segments_a_dask_layer_blockwise(make_napari_viewer, qtbot):

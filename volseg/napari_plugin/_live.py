@@ -13,6 +13,7 @@ from __future__ import annotations
 import dataclasses
 import shutil
 import tempfile
+import weakref
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -81,6 +82,9 @@ class LiveSegmentation:
                                          dtype=data.dtype)
         self.close()
         self._work = Path(tempfile.mkdtemp(prefix="volseg-napari-"))
+        # Removed on `close`, or when this object goes or the interpreter exits (a
+        # viewer closed without closing its dock widget first).
+        self._finalizer = weakref.finalize(self, shutil.rmtree, str(self._work), True)
         paths = {kind: self._work / f"{kind}.zarr" for kind in ("curvature", "labels")}
         storage = BlockwiseStorage(data, request, paths, folder=self._work, stem=volume.name,
                                    checksum=None, frame=volume.frame, say=say)
@@ -144,5 +148,5 @@ class LiveSegmentation:
     def close(self) -> None:
         """Remove the blockwise work folder (the cells the cuts read)."""
         if self._work is not None:
-            shutil.rmtree(self._work, ignore_errors=True)
+            self._finalizer()
             self._work = None

@@ -38,7 +38,6 @@ from qtpy.QtWidgets import (
 )
 
 from ..curvature import OPERATORS
-from ..errors import VolsegError
 from ..morse import MEASURES
 from ..segment import DEFAULT_MEASURE, DEFAULT_REGIONS
 from ._layers import layer_volume
@@ -55,11 +54,12 @@ SLIDER_STEPS = 1000
 
 def _guarded(function, *args, **kwargs) -> tuple:
     """(result, None), or (None, the error) for what a user can act on: a cancel, a
-    refused input or output (volseg's one-line errors), a full disk. napari shows any
-    other exception with its traceback: a bug."""
+    refused input, parameter or output (volseg's errors are ValueErrors with one-line
+    messages), a full disk. napari shows any other exception with its traceback: a
+    bug."""
     try:
         return function(*args, **kwargs), None
-    except (Cancelled, VolsegError, OSError) as err:
+    except (Cancelled, ValueError, OSError) as err:
         return None, err
 
 
