@@ -106,3 +106,17 @@ def test_labels_into_input_refusals_come_before_any_output(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "labels/volseg exists; give --force" in err and str(image) in err
     assert not (tmp_path / "out2").exists() or not any((tmp_path / "out2").iterdir())
+
+
+def test_a_blockwise_run_adds_its_stored_labels(tmp_path):
+    """The blockwise path's labels (a Zarr store, never whole in memory) go into the
+    input image block by block and equal the run's own labels store."""
+    from volseg.files import load_volume
+
+    image = _ome_image(tmp_path / "cells.ome.zarr", "0.5")
+    assert main(["segment", str(image), "-o", str(tmp_path / "out"), "--chunks", "16",
+                 "--labels-into-input", "regions-v1", "--regions", "6", "-q"]) == 0
+    added = np.asarray(load_volume(str(image / "labels" / "regions-v1")).data)
+    stored = np.asarray(load_volume(str(tmp_path / "out" / "cells_labels.zarr")).data)
+    np.testing.assert_array_equal(added, stored)
+    assert added.max() == 6
