@@ -112,6 +112,9 @@ def test_reader_opens_an_output_set_and_the_ngff_output(make_napari_viewer, tmp_
     expected = np.asanyarray(nibabel.load(tmp_path / "out" / "blobs_labels.nii.gz").dataobj)
     assert np.array_equal(np.asarray(labels.data), expected.transpose(2, 1, 0))
     assert tuple(labels.scale) == (2, 2, 2) and tuple(labels.translate) == (7, 6, 5)
+    alone, = viewer.open(str(tmp_path / "out" / "blobs_labels.nii.gz"), plugin="volseg")
+    assert alone._type_string == "labels" and tuple(alone.translate) == (7, 6, 5)
+    assert np.array_equal(np.asarray(alone.data), expected.transpose(2, 1, 0))
     curvature_ngff, labels_ngff = viewer.open(
         str(tmp_path / "out" / "blobs_segmentation.ome.zarr"), plugin="volseg")
     assert np.array_equal(np.asarray(labels_ngff.data[0] if labels_ngff.multiscale
@@ -148,6 +151,14 @@ def test_widget_labels_equal_segment_volume_and_the_slider_recuts(make_napari_vi
     assert widget.live.result.n_regions == expected.hierarchy.n_components
     widget.threshold_slider.setValue(0)
     assert widget.live.result.n_regions == widget.live.max_regions()
+    # Another measure recuts at once, with the same count, and its own curve.
+    widget.count_box.setValue(6)
+    widget.measure.setCurrentText("persistence")
+    assert widget.live.result.measure == "persistence" and widget.live.result.n_regions == 6
+    assert np.array_equal(widget.labels_layer.data, expected.hierarchy.segment(
+        n_regions=6, measure="persistence", min_component=expected.cut["min_component"]))
+    assert widget.threshold_label.text().startswith("persistence ")
+    widget.measure.setCurrentText(expected.measure)
     # A region's details are the region table's.
     widget.count_box.setValue(4)
     info = widget.show_region(2)

@@ -104,6 +104,15 @@ class LiveSegmentation:
                                         out=labels if reuse else None)
         return self.labels()
 
+    def set_measure(self, measure: str):
+        """Cut by another measure (DESIGN.md section 12), keeping the region count:
+        the hierarchy has every measure, nothing is recomputed."""
+        labels = self.result.labels
+        reuse = isinstance(labels, np.ndarray) and labels.dtype == np.int32
+        self.result = self.result.recut(self.result.n_regions, measure=measure,
+                                        out=labels if reuse else None)
+        return self.labels()
+
     def snapshot(self) -> Segmentation:
         """The current cut with labels of its own (for a writer in another thread)."""
         labels = self.result.labels

@@ -45,7 +45,12 @@ def read(path) -> list[tuple]:
         return _output_set(path)
     if path.name.endswith(NGFF_SUFFIX) and (path / NGFF_LABELS).is_dir():
         return _ngff_output(path)
-    return [_input_layer(_load(path))]
+    volume = _load(path)
+    if path.name.endswith((OUTPUT_SUFFIXES["labels"], BLOCKWISE_SUFFIXES["labels"])):
+        # One of volseg's label maps opened on its own: a labels layer, not an image.
+        return [_result_layer(to_layer(volume.data), volume.name, "labels",
+                              frame_kwargs(volume.frame))]
+    return [_input_layer(volume)]
 
 
 def demo_layers() -> list[tuple]:

@@ -114,6 +114,7 @@ class SegmentWidget(QWidget):
         self.measure = QComboBox()
         self.measure.addItems(list(MEASURES))
         self.measure.setCurrentText(DEFAULT_MEASURE)
+        self.measure.currentTextChanged.connect(self._measure_changed)
         self.regions = QSpinBox()
         self.regions.setRange(1, 1_000_000)
         self.regions.setValue(DEFAULT_REGIONS)
@@ -303,6 +304,14 @@ class SegmentWidget(QWidget):
         else:
             layer.data = labels
         self._show_cut()
+
+    def _measure_changed(self, measure: str):
+        """After a run, another measure recuts at once (same count, its own curve)."""
+        if self.live is not None and self.live.result is not None \
+                and self.labels_layer is not None:
+            labels = self.live.set_measure(measure)
+            self._draw_curve()
+            self._show_labels(labels)
 
     def _count_moved(self, position: int):
         if self.live is not None and self.live.result is not None:
