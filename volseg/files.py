@@ -227,7 +227,7 @@ def _check_labels_into_input(volumes, name, force) -> None:
     `force`)."""
     if name is None:
         return
-    from .io.ngff import is_ome_image
+    from .io.ngff import is_ome_image, recover_labels
 
     if not name or not all(c.isalnum() or c in "-_." for c in name) or name.startswith("."):
         raise UsageError(f"--labels-into-input: {name!r} is not a labels image name (letters, "
@@ -236,6 +236,7 @@ def _check_labels_into_input(volumes, name, force) -> None:
         if volume.path is None or not is_ome_image(volume.path):
             raise UsageError(f"--labels-into-input: {volume.path or volume.name} is not an "
                              "OME-Zarr image (labels are added only to one)")
+        recover_labels(volume.path, name)      # what a killed run left, undone first
         if (Path(volume.path) / "labels" / name).exists() and not force:
             raise UsageError(f"--labels-into-input: {Path(volume.path) / 'labels' / name} "
                              "exists; give --force to replace it")

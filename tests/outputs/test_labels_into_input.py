@@ -120,3 +120,69 @@ def test_a_blockwise_run_adds_its_stored_labels(tmp_path):
     stored = np.asarray(load_volume(str(tmp_path / "out" / "cells_labels.zarr")).data)
     np.testing.assert_array_equal(added, stored)
     assert added.max() == 6
+
+
+def test_what_a_killed_writer_left_is_undone(tmp_path):
+    """A kill while staging leaves a hidden staging group (removed); a kill between
+    moving the old labels image aside and moving the new one in leaves only the old one
+    aside (moved back): readers never find a listed labels image missing or partial."""
+    import shutil
+
+    from volseg.files import load_volume
+    from volseg.io.ngff import recover_labels, write_labels_into
+
+    image = _ome_image(tmp_path / "cells.ome.zarr", "0.4")
+    first = (np.asarray(load_volume(str(image)).data) > 100).astype(np.uint8)
+    write_labels_into(image, first)
+    root = image / "labels"
+    # Killed between the two renames of a replacement: the old image is aside.
+    (root / "volseg").rename(root / ".volseg.volseg-old")
+    shutil.copytree(root / ".volseg.volseg-old", root / ".volseg.volseg-staging")
+    recover_labels(image, "volseg")
+    assert sorted(p.name for p in root.iterdir() if not p.name.startswith(".z")) == ["volseg"]
+    np.testing.assert_array_equal(np.asarray(load_volume(str(root / "volseg")).data), first)
+    # Killed after the new one arrived: the old copy aside is removed.
+    shutil.copytree(root / "volseg", root / ".volseg.volseg-old")
+    second = 1 - first
+    write_labels_into(image, second, force=True)
+    assert not any(p.name.startswith(".volseg") for p in root.iterdir())
+    np.testing.assert_array_equal(np.asarray(load_volume(str(root / "volseg")).data), second)
+    # A planted link where volseg's own groups go is refused, not followed.
+    (root / ".volseg.volseg-old").symlink_to(tmp_path)
+    with pytest.raises(ValueError, match="is a link"):
+        recover_labels(image, "volseg")
+
+
+@pytest.mark.parametrize("version", ["0.4", "0.5"])
+def test_background_chunks_are_written_so_volseg_reads_its_own_outputs(tmp_path, version):
+    """Zarr skips chunks of the fill value by default, and volseg's reader refuses a
+    store with missing chunks: every chunk of the NGFF output and of the labels added
+    to an input is written, so both read back through volseg (and its napari reader)."""
+    import zarr
+
+    from volseg.files import load_volume
+    from volseg.io import Frame, write_ngff
+    from volseg.io.ngff import write_labels_into
+
+    labels = np.zeros((130, 140, 150), np.uint8)        # 3 x 3 x 3 chunks, 26 all zero
+    labels[60:70, 60:70, 60:70] = 1
+    out = write_ngff(tmp_path / "x.ome.zarr", labels, np.zeros(labels.shape),
+                     Frame.from_spacing((1.0, 2.0, 3.0)))
+    for sub in ("", "labels/regions"):
+        for level in (0, 1):
+            data = np.asarray(load_volume(str(out / sub), ome_level=level).data)
+            assert data.shape == tuple(s // 2**level for s in labels.shape)
+    np.testing.assert_array_equal(np.asarray(load_volume(str(out / "labels/regions")).data),
+                                  labels)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)
+        from ome_zarr.format import FormatV04, FormatV05
+        from ome_zarr.writer import write_multiscale
+
+        fmt = FormatV04() if version == "0.4" else FormatV05()
+        root = zarr.open_group(str(tmp_path / "in.ome.zarr"), mode="w",
+                               zarr_format=fmt.zarr_format)
+        write_multiscale([np.zeros(labels.shape[::-1], np.uint8)], root, fmt=fmt,
+                         axes=[{"name": a, "type": "space"} for a in "zyx"])
+    added = write_labels_into(tmp_path / "in.ome.zarr", labels)
+    np.testing.assert_array_equal(np.asarray(load_volume(str(added)).data), labels)

@@ -25,10 +25,15 @@ import numpy as np
 from ..errors import OutputError, VolumeFileError
 from .volume import Frame
 
-__all__ = ["write_ngff", "write_labels_into", "is_ome_image", "pyramid_levels", "NGFF_CHUNK"]
+__all__ = ["write_ngff", "write_labels_into", "recover_labels", "is_ome_image",
+           "pyramid_levels", "NGFF_CHUNK"]
 
 #: Chunk edge of every level (64^3: 256 KB of uint8 labels, 1 MB of float32).
 NGFF_CHUNK = 64
+#: Every chunk is written, all-zero ones too: Zarr skips chunks of the fill value by
+#: default, and volseg's reader refuses a store with missing chunks (one that was never
+#: written whole reads as zeros), so it would refuse its own output's background.
+STORAGE = {"config": {"write_empty_chunks": True}}
 #: Levels are added until the smallest axis is at most this many voxels.
 SMALLEST_LEVEL = 64
 
@@ -85,10 +90,11 @@ def write_ngff(path, labels, curvature, frame: Frame) -> Path:
         warnings.filterwarnings("ignore", "The 'coordinate_transformations' argument",
                                 DeprecationWarning)
         write_multiscale(mean_levels, root, name="curvature", axes=axes,
-                         coordinate_transformations=mean_transforms)
+                         coordinate_transformations=mean_transforms, storage_options=STORAGE)
         write_multiscale_labels(label_levels, root, name="regions", axes=axes,
                                 coordinate_transformations=label_transforms,
-                                label_metadata={"source": {"image": "../../"}})
+                                label_metadata={"source": {"image": "../../"}},
+                                storage_options=STORAGE)
     return path
 
 
@@ -109,6 +115,39 @@ def is_ome_image(path) -> bool:
     return bool(attrs.get("multiscales") or (attrs.get("ome") or {}).get("multiscales"))
 
 
+def recover_labels(image, name: str) -> None:
+    """Undo what a killed `write_labels_into` left in ``image/labels``: a staging group
+    is removed; a replaced labels image moved aside (``.<name>.volseg-old``) is moved
+    back when the new one never arrived, else removed. Readers then see either the
+    old labels image or the new one, whole. Under the lock `write_labels_into` takes."""
+    root = Path(image) / "labels"
+    if not root.is_dir():
+        return
+    with _labels_lock(root, name):
+        _recover(root, name)
+
+
+def _labels_lock(root: Path, name: str):
+    from .output_set import FolderLock
+
+    return FolderLock(root, f"{name}.labels", busy="another volseg is adding these labels")
+
+
+def _recover(root: Path, name: str) -> None:
+    staging, old, target = (root / f".{name}.volseg-staging", root / f".{name}.volseg-old",
+                            root / name)
+    for path in (staging, old, target):
+        if path.is_symlink():
+            raise OutputError(f"{path} is a link: volseg writes only groups it made")
+    if staging.exists():
+        shutil.rmtree(staging)
+    if old.exists():
+        if target.exists():
+            shutil.rmtree(old)
+        else:
+            os.rename(old, target)
+
+
 def write_labels_into(image, labels, *, name: str = "volseg", level: int = 0,
                       force: bool = False) -> Path:
     """Add `labels` ((X, Y, Z) numpy or Dask, the grid of the image's level `level`) to
@@ -120,9 +159,10 @@ def write_labels_into(image, labels, *, name: str = "volseg", level: int = 0,
     The pyramid is written into a hidden staging group beside it and renamed into place
     (one rename on a local filesystem), then listed; an existing ``labels/<name>`` is
     refused unless `force` (then replaced). Images with axes other than three spatial
-    ones (channels, time) are refused: their labels would need those axes too.
+    ones (channels, time) are refused: their labels would need those axes too. One
+    writer at a time per image and name (a lock in ``labels/``); what a killed writer
+    left is undone first (`recover_labels`).
     """
-    import dask.array as da
     import zarr
 
     from .zarr_store import _ome_level
@@ -130,7 +170,6 @@ def write_labels_into(image, labels, *, name: str = "volseg", level: int = 0,
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", DeprecationWarning)
         from ome_zarr.format import FormatV04, FormatV05
-        from ome_zarr.writer import add_metadata, get_metadata, write_multiscale
 
     image = Path(image)
     group = zarr.open_group(str(image), mode="r+")
@@ -145,12 +184,28 @@ def write_labels_into(image, labels, *, name: str = "volseg", level: int = 0,
                               f"labels {shape} in its axis order")
     fmt = FormatV05() if "ome" in group.attrs.asdict() else FormatV04()
     root = image / "labels"
-    target, staging = root / name, root / f".{name}.volseg-staging"
-    if target.exists() and not force:
-        raise OutputError(f"{target} exists: give --force to replace it")
+    target = root / name
     labels_group = group.require_group("labels")
-    if staging.exists():
-        shutil.rmtree(staging)        # a killed run's
+    with _labels_lock(root, name):
+        _recover(root, name)
+        if target.exists() and not force:
+            raise OutputError(f"{target} exists: give --force to replace it")
+        _write_labels(labels, labels_group, root, name, order, shape, fmt, axes, factors, origin,
+                      units)
+    return target
+
+
+def _write_labels(labels, labels_group, root, name, order, shape, fmt, axes, factors, origin,
+                  units) -> None:
+    """`write_labels_into`'s writing, under its lock: staged, renamed, listed."""
+    import dask.array as da
+    import zarr
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)
+        from ome_zarr.writer import add_metadata, get_metadata, write_multiscale
+
+    target, staging = root / name, root / f".{name}.volseg-staging"
     levels = [labels if hasattr(labels, "dask") else
               da.from_array(np.asarray(labels), chunks=NGFF_CHUNK)]
     levels[0] = levels[0].transpose(*order).rechunk(NGFF_CHUNK)
@@ -163,16 +218,16 @@ def write_labels_into(image, labels, *, name: str = "volseg", level: int = 0,
         warnings.filterwarnings("ignore", "The 'coordinate_transformations' argument",
                                 DeprecationWarning)
         write_multiscale(levels, labels_group.create_group(staging.name), fmt=fmt,
-                         axes=axes_meta, coordinate_transformations=transforms, name=name)
+                         axes=axes_meta, coordinate_transformations=transforms, name=name,
+                         storage_options=STORAGE)
     staged = zarr.open_group(str(staging), mode="r+")
     add_metadata(staged, {"image-label": {"version": fmt.version,
                                           "source": {"image": "../../"}}}, fmt=fmt)
     old = root / f".{name}.volseg-old"
     if target.exists():
-        os.rename(target, old)
+        os.rename(target, old)        # a kill here: `recover_labels` moves it back
     os.rename(staging, target)
     shutil.rmtree(old, ignore_errors=True)
     listed = list(get_metadata(labels_group).get("labels", []))
     if name not in listed:
         add_metadata(labels_group, {"labels": [*listed, name]}, fmt=fmt)
-    return target
