@@ -129,6 +129,9 @@ def _add_segment_io(seg):
     seg.add_argument("--allow-external-data", action="store_true",
                      help="let a detached header (.nhdr, .dat) name a data file outside its "
                      "folder, or a Zarr store hold links to files outside it")
+    seg.add_argument("--fill-missing-chunks", action="store_true",
+                     help="read a Zarr store's unwritten chunks as its fill value, as Zarr "
+                     "does (default: refused, since an interrupted copy looks the same)")
     seg.add_argument("--channel", type=int, metavar="C",
                      help="the channel of an OME-Zarr image with several (its 'c' axis)")
     seg.add_argument("--ome-level", type=int, metavar="L",
@@ -205,6 +208,7 @@ def _add_others(sub):
     info.add_argument("--shape", type=int, nargs=3, metavar=("X", "Y", "Z"))
     info.add_argument("--dtype")
     info.add_argument("--allow-external-data", action="store_true")
+    info.add_argument("--fill-missing-chunks", action="store_true")
     info.add_argument("--channel", type=int, metavar="C")
     info.add_argument("--ome-level", type=int, metavar="L")
 
@@ -283,6 +287,7 @@ def _cmd_segment(args):
     _check_mask_rule(mask)
     volumes = [load_for_budget(name, engine.memory_limit, shape=args.shape, dtype=args.dtype,
                                allow_external_data=args.allow_external_data,
+                               fill_missing_chunks=args.fill_missing_chunks,
                                chunks=args.chunks, channel=args.channel,
                                ome_level=args.ome_level, say=say)
                for name in args.inputs]
@@ -394,7 +399,8 @@ def _cmd_info(args):
     from .files import load_volume
 
     volume = load_volume(args.input, args.shape, args.dtype, args.allow_external_data,
-                         channel=args.channel, ome_level=args.ome_level)
+                         channel=args.channel, ome_level=args.ome_level,
+                         fill_missing_chunks=args.fill_missing_chunks)
     data = volume.data
     frame = volume.frame
     if hasattr(data, "compute"):          # a Zarr store: one pass over its chunks

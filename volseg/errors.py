@@ -5,8 +5,8 @@ turns each into one line on stderr and exit code 2; a Python caller can catch
 `VolsegError` for all of them.
 """
 
-__all__ = ["VolsegError", "UsageError", "VolumeFileError", "OutputError", "DatasetError",
-           "EngineError"]
+__all__ = ["VolsegError", "UsageError", "VolumeFileError", "MissingChunksError", "OutputError",
+           "DatasetError", "EngineError"]
 
 
 class VolsegError(ValueError):
@@ -23,6 +23,11 @@ class VolumeFileError(VolsegError):
     Raised by every reader for every malformed input (truncated data, a header field
     that is missing or out of range, an unknown type), never a bare numpy error.
     """
+
+
+class MissingChunksError(VolumeFileError):
+    """A Zarr store with chunks that were never written (``fill_missing_chunks`` reads
+    them as the fill value)."""
 
 
 class OutputError(VolsegError):

@@ -50,20 +50,22 @@ def _quiet(message):
 
 
 def load_volume(name, shape=None, dtype=None, allow_external_data=False, chunks=None,
-                channel=None, ome_level=None):
+                channel=None, ome_level=None, fill_missing_chunks=False):
     """The `Volume` of a volume file or a named dataset (`volseg.datasets.resolve`); lazy
     (a Dask array of `chunks`) when `chunks` is given; `channel` and resolution
-    `ome_level` of an OME-Zarr image."""
+    `ome_level` of an OME-Zarr image; `fill_missing_chunks` of a Zarr store
+    (`volseg.io.read_volume`)."""
     from .datasets import resolve
     from .io import read_volume
 
     return read_volume(resolve(name), shape=shape, dtype=dtype,
                        allow_external_data=allow_external_data, chunks=chunks, channel=channel,
-                       ome_level=ome_level)
+                       ome_level=ome_level, fill_missing_chunks=fill_missing_chunks)
 
 
 def load_for_budget(name, budget: int, *, shape=None, dtype=None, allow_external_data=False,
-                    chunks=None, channel=None, ome_level=None, say=_quiet):
+                    chunks=None, channel=None, ome_level=None, fill_missing_chunks=False,
+                    say=_quiet):
     """`load_volume`, lazily (the blockwise path, `DEFAULT_CHUNKS`) when `chunks` is not
     given but the in-memory path would need more than `budget` bytes
     (`IN_MEMORY_BYTES_PER_VOXEL` per voxel). The file size bounds the voxel count from
@@ -73,7 +75,8 @@ def load_for_budget(name, budget: int, *, shape=None, dtype=None, allow_external
     from .datasets import resolve
 
     options = {"shape": shape, "dtype": dtype, "allow_external_data": allow_external_data,
-               "channel": channel, "ome_level": ome_level}
+               "channel": channel, "ome_level": ome_level,
+               "fill_missing_chunks": fill_missing_chunks}
     if chunks is not None:
         return load_volume(name, **options, chunks=chunks)
     path = resolve(name)       # a dataset name is verified once, here

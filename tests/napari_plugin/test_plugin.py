@@ -280,3 +280,15 @@ def _clicked_twice_is_harmless(widget, labels):
     widget._clicked(labels, SimpleNamespace(position=(-50.0, -50.0, -50.0), view_direction=None,
                                             dims_displayed=[1, 2]))
     return widget.region_info.text() == before
+
+
+def test_reader_reads_a_store_with_skipped_chunks_and_says_so(tmp_path):
+    from volseg.napari_plugin._reader import read
+
+    from ..outputs.test_labels_into_input import _sparse_ome_image
+
+    image, data = _sparse_ome_image(tmp_path / "sparse.ome.zarr")
+    with pytest.warns(UserWarning, match="--fill-missing-chunks"):
+        (layer_data, options, kind), = read(str(image))
+    assert kind == "image"
+    np.testing.assert_array_equal(np.asarray(layer_data), data)

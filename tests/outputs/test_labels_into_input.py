@@ -186,3 +186,44 @@ def test_background_chunks_are_written_so_volseg_reads_its_own_outputs(tmp_path,
                          axes=[{"name": a, "type": "space"} for a in "zyx"])
     added = write_labels_into(tmp_path / "in.ome.zarr", labels)
     np.testing.assert_array_equal(np.asarray(load_volume(str(added)).data), labels)
+
+
+def _sparse_ome_image(path):
+    """An OME-Zarr image as ome-zarr-py writes it by default: chunks of the fill value
+    (an empty background) are not written at all."""
+    import zarr
+
+    data = np.zeros((40, 40, 130), np.uint8)             # z, y, x: 1 x 1 x 3 chunks of 64
+    data[:, :, :40] = demo_volume(40).transpose(2, 1, 0)[:, :, :40]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)
+        import dask.array as da
+        from ome_zarr.format import FormatV05
+        from ome_zarr.writer import write_multiscale
+
+        root = zarr.open_group(str(path), mode="w", zarr_format=3)
+        write_multiscale([da.from_array(data, chunks=64)], root, fmt=FormatV05(),
+                         axes=[{"name": a, "type": "space"} for a in "zyx"])
+    written = zarr.open_array(str(path / "s0"), mode="r")
+    assert written.nchunks_initialized < written.nchunks      # as the writer leaves it
+    return path, data
+
+
+def test_a_store_whose_writer_skipped_empty_chunks_reads_on_request(tmp_path, capsys):
+    """Refused by default (an interrupted copy looks the same), with the way out named;
+    `--fill-missing-chunks` reads the skipped chunks as the fill value, exactly."""
+    from volseg import segment_volume
+    from volseg.files import load_volume
+
+    image, data = _sparse_ome_image(tmp_path / "sparse.ome.zarr")
+    assert main(["segment", str(image), "-o", str(tmp_path / "no"), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert "chunks are missing" in err and "--fill-missing-chunks" in err
+    assert main(["info", str(image), "--fill-missing-chunks"]) == 0
+    assert main(["segment", str(image), "-o", str(tmp_path / "out"), "--regions", "4",
+                 "--fill-missing-chunks", "-q"]) == 0
+    read = np.asarray(load_volume(str(image), fill_missing_chunks=True).data)
+    np.testing.assert_array_equal(read, data.transpose(2, 1, 0))
+    expected = segment_volume(data.transpose(2, 1, 0), n_regions=4)
+    written = np.asarray(nibabel.load(tmp_path / "out" / "sparse_labels.nii.gz").dataobj)
+    np.testing.assert_array_equal(written, expected.labels)

@@ -462,7 +462,7 @@ def compressed_shape(path):
 
 def read_volume(path, *, shape=None, dtype=None, byte_order=None,
                 allow_external_data: bool = False, chunks=None, channel=None,
-                ome_level=None) -> Volume:
+                ome_level=None, fill_missing_chunks: bool = False) -> Volume:
     """Read a volume from a file, by extension.
 
     Parameters
@@ -496,6 +496,9 @@ def read_volume(path, *, shape=None, dtype=None, byte_order=None,
         then; an image of one channel needs none).
     ome_level : int, optional
         The resolution level of an OME-Zarr image (default 0, the full one).
+    fill_missing_chunks : bool
+        Read a Zarr store's chunks that were never written as its fill value (Zarr's
+        specification), rather than refuse the store (`volseg.io.read_zarr`).
 
     Returns
     -------
@@ -536,7 +539,7 @@ def read_volume(path, *, shape=None, dtype=None, byte_order=None,
     if is_zarr(path):
         # lazy: a Dask array over the store's chunks
         return read_zarr(path, allow_external_data=allow_external_data, channel=channel,
-                         ome_level=ome_level)
+                         ome_level=ome_level, fill_missing_chunks=fill_missing_chunks)
     if channel is not None or ome_level is not None:
         raise ValueError(f"{path}: `channel` and `ome_level` apply to OME-Zarr images only")
     reader = _read_tiff if _is_tiff_folder(path) else _reader(path)

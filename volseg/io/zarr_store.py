@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import MissingChunksError
 from .volume import Frame, Volume, VolumeFileError, length_unit
 
 __all__ = ["read_zarr", "write_zarr", "is_zarr"]
@@ -162,7 +163,8 @@ def _other_axes(path, axes, shape, channel) -> dict:
     return pick
 
 
-def _checked_array(node, path, allow_external_data, channel, level=None):
+def _checked_array(node, path, allow_external_data, channel, level=None,
+                   fill_missing_chunks=False):
     """`_array_of`, then every check that needs no chunk's values (see the module)."""
     array, order, frame, pick = _array_of(node, path, channel, level)
     if array.ndim != 3 and order is None:
@@ -174,24 +176,31 @@ def _checked_array(node, path, allow_external_data, channel, level=None):
     _check_layout(array, path, order)
     if not allow_external_data:
         _refuse_links_out(path)
+    if fill_missing_chunks:
+        return array, order, frame, pick
     if array.nchunks_initialized < array.nchunks:
-        raise VolumeFileError(
+        raise MissingChunksError(
             f"{path}: {array.nchunks - array.nchunks_initialized} of {array.nchunks} chunks are "
-            f"missing; Zarr would read them as the fill value {array.fill_value!r} (rewrite the "
-            "store with every chunk written)")
+            f"missing; Zarr would read them as the fill value {array.fill_value!r}. A copy "
+            "cut short looks like this; so does a store whose writer skipped chunks of the "
+            "fill value (Zarr's default): then give --fill-missing-chunks")
     if getattr(array, "shards", None) is not None:
         _check_shards(array, path)
     return array, order, frame, pick
 
 
 def read_zarr(path, *, allow_external_data: bool = False, channel=None,
-              ome_level=None) -> Volume:
+              ome_level=None, fill_missing_chunks: bool = False) -> Volume:
     """Open a Zarr array or OME-Zarr image as a lazily read `Volume` (see the module).
 
     `allow_external_data`: let the store hold links to files outside it (refused by
     default: a store from elsewhere cannot make volseg read, and publish a checksum
     of, any file). `channel`: of an OME-Zarr image with several; `ome_level`: the
-    resolution level of an OME-Zarr image (default 0, the full resolution)."""
+    resolution level of an OME-Zarr image (default 0, the full resolution).
+    `fill_missing_chunks`: read chunks that were never written as the fill value, as
+    Zarr's specification says (refused by default: an interrupted copy looks the same,
+    but writers that skip chunks of the fill value, Zarr's and ome-zarr-py's default,
+    make such stores on purpose)."""
     import dask.array as da
     import zarr
 
@@ -203,7 +212,7 @@ def read_zarr(path, *, allow_external_data: bool = False, channel=None,
                               f"{err})") from None
     try:
         array, order, frame, pick = _checked_array(node, path, allow_external_data, channel,
-                                                   ome_level)
+                                                   ome_level, fill_missing_chunks)
     except VolumeFileError:
         raise
     except Exception as err:  # noqa: BLE001 - hostile metadata breaks Zarr in any way
@@ -298,10 +307,10 @@ def _check_shards(array, path):
         empty = (index.reshape(per + (2,)) == np.iinfo(np.uint64).max).all(axis=-1)
         missing += int((empty & inside).sum())
     if missing:
-        raise VolumeFileError(
+        raise MissingChunksError(
             f"{path}: {missing} inner chunks of its shards are missing; Zarr would read them "
-            f"as the fill value {array.fill_value!r} (rewrite the store with every chunk "
-            "written)")
+            f"as the fill value {array.fill_value!r} (give --fill-missing-chunks if its writer "
+            "skipped chunks of the fill value)")
 
 
 class _Checked:

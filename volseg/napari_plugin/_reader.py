@@ -5,11 +5,12 @@ refused with its one-line message, as at the command line)."""
 from __future__ import annotations
 
 import json
+import warnings
 from pathlib import Path
 
 import numpy as np
 
-from ..errors import VolsegError
+from ..errors import MissingChunksError, VolsegError
 from ..outputs import BLOCKWISE_SUFFIXES, NGFF_SUFFIX, OUTPUT_SUFFIXES
 from ._layers import frame_kwargs, to_layer
 
@@ -62,11 +63,22 @@ def demo_layers() -> list[tuple]:
 
 
 def _load(path: Path, **options):
+    """volseg's reader; a Zarr store whose writer skipped chunks of the fill value (Zarr's
+    and ome-zarr-py's default) is read with them as the fill value, and napari shows a
+    warning saying so (the CLI refuses it unless ``--fill-missing-chunks``)."""
     from ..blockwise.engine import default_memory_limit
     from ..files import load_for_budget
 
     try:
-        return load_for_budget(str(path), default_memory_limit(), **options)
+        try:
+            return load_for_budget(str(path), default_memory_limit(), **options)
+        except MissingChunksError as err:
+            volume = load_for_budget(str(path), default_memory_limit(), **options,
+                                     fill_missing_chunks=True)
+            warnings.warn(f"{err}: read them as the fill value, as every Zarr reader does "
+                          "(volseg segment needs --fill-missing-chunks for this store)",
+                          UserWarning, stacklevel=2)
+            return volume
     except VolsegError as err:
         raise ValueError(str(err)) from None     # napari shows a reader's error as one line
 
