@@ -71,8 +71,8 @@ def relabel(vertices, cell, ids):
 @numba.njit(cache=True, parallel=True)
 def take(table, cells, out):
     """out[i] = table[cells[i]], a negative cell counted from the table's end (-1: its
-    last entry): numpy's ``take`` on every core (a cut of 256^3 cells: 45 ms on one,
-    about half on two)."""
+    last entry): numpy's ``take`` on every core. A whole cut of 256^3 cells took
+    11-17 ms with it on 2 cores, against 55-130 ms with numpy's ``table[cells]``."""
     n = len(table)
     for i in numba.prange(len(cells)):
         c = cells[i]

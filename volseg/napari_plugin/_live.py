@@ -97,20 +97,17 @@ class LiveSegmentation:
         labels as the layer shows them. In memory, every cut is written into the first
         cut's array (no 4 bytes per voxel allocated per slider step): the layer's data
         stays the same object, and `snapshot` gives a copy that later cuts leave alone."""
-        labels = self.result.labels
-        reuse = isinstance(labels, np.ndarray) and labels.dtype == np.int32
-        self.result = self.result.recut(n_regions, threshold=threshold,
-                                        measure=self.result.measure,
-                                        out=labels if reuse else None)
-        return self.labels()
+        return self._recut(n_regions, threshold=threshold, measure=self.result.measure)
 
     def set_measure(self, measure: str):
         """Cut by another measure (DESIGN.md section 12), keeping the region count:
         the hierarchy has every measure, nothing is recomputed."""
+        return self._recut(self.result.n_regions, measure=measure)
+
+    def _recut(self, n_regions, **cut):
         labels = self.result.labels
         reuse = isinstance(labels, np.ndarray) and labels.dtype == np.int32
-        self.result = self.result.recut(self.result.n_regions, measure=measure,
-                                        out=labels if reuse else None)
+        self.result = self.result.recut(n_regions, **cut, out=labels if reuse else None)
         return self.labels()
 
     def snapshot(self) -> Segmentation:
