@@ -190,7 +190,13 @@ def test_output_button_writes_the_clis_set(make_napari_viewer, qtbot, rotated_um
     widget.out_dir.setText(str(tmp_path / "gui"))
     (tmp_path / "gui").mkdir()
     widget._write_clicked()
-    qtbot.waitUntil(lambda: widget.write_button.isEnabled(), timeout=WAIT_MS)
+    assert not widget.run_button.isEnabled()       # no second worker while it writes
+    qtbot.waitUntil(lambda: widget.worker is None, timeout=WAIT_MS)
+    assert widget.write_button.isEnabled() and widget.run_button.isEnabled()
+    assert widget.status.text().startswith("wrote rot_labels.nii.gz")
+    widget._write_clicked()                         # again, without "overwrite"
+    qtbot.waitUntil(lambda: widget.worker is None, timeout=WAIT_MS)
+    assert "exist" in widget.status.text() and "\n" not in widget.status.text()
     assert main(["segment", str(rotated_um_nifti), "--out-dir", str(tmp_path / "cli"),
                  "--regions", "7", "-q"]) == 0
     gui, cli = (sorted(p.name for p in (tmp_path / d).iterdir()) for d in ("gui", "cli"))

@@ -429,13 +429,19 @@ class SegmentWidget(QWidget):
             self.status.setText("choose an output folder first")
             return
         self.write_button.setEnabled(False)
+        self.run_button.setEnabled(False)      # one worker at a time
         # The cut as it is now: the sliders may move while the set is written.
         self.worker = create_worker(_guarded, self.live.write, folder,
                                     result=self.live.snapshot(), force=self.force.isChecked(),
                                     say=self._bridge.said.emit)
         self.worker.returned.connect(self._written)
-        self.worker.finished.connect(lambda: self.write_button.setEnabled(True))
+        self.worker.finished.connect(self._written_idle)
         self.worker.start()
+
+    def _written_idle(self):
+        self.write_button.setEnabled(True)
+        self.run_button.setEnabled(True)
+        self.worker = None
 
     def _written(self, outcome):
         info, err = outcome
