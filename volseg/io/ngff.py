@@ -18,6 +18,7 @@ from __future__ import annotations
 import os
 import shutil
 import warnings
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -25,7 +26,7 @@ import numpy as np
 from ..errors import OutputError, VolumeFileError
 from .volume import Frame
 
-__all__ = ["write_ngff", "write_labels_into", "recover_labels", "is_ome_image",
+__all__ = ["write_ngff", "write_labels_into", "recover_labels", "is_ome_image", "ome_levels",
            "pyramid_levels", "NGFF_CHUNK"]
 
 #: Chunk edge of every level (64^3: 256 KB of uint8 labels, 1 MB of float32).
@@ -48,6 +49,42 @@ def pyramid_levels(shape) -> int:
     return levels
 
 
+def _level0(array, order):
+    """An (X, Y, Z) numpy or Dask array as a level 0: lazy, its axes in `order`, in
+    NGFF chunks."""
+    import dask.array as da
+
+    base = array if hasattr(array, "dask") else da.from_array(np.asarray(array),
+                                                             chunks=NGFF_CHUNK)
+    return base.transpose(*order).rechunk(NGFF_CHUNK)
+
+
+def _label_pyramid(labels, order) -> list:
+    """`_level0` of `labels` and the levels below it, each every second voxel of the
+    one above (labels are never blended; a level's first voxel centre stays level
+    0's)."""
+    levels = [_level0(labels, order)]
+    for _ in range(pyramid_levels(levels[0].shape)):
+        levels.append(levels[-1][::2, ::2, ::2].rechunk(NGFF_CHUNK))
+    return levels
+
+
+def _space_axes(names, units) -> list:
+    """NGFF axis metadata: spatial axes `names`, each with its unit when known."""
+    return [{"name": name, "type": "space", **({"unit": unit} if unit else {})}
+            for name, unit in zip(names, units, strict=True)]
+
+
+@contextmanager
+def _with_translations():
+    """ome-zarr 0.18 deprecates `coordinate_transformations` for `scale`, which has no
+    translation: without it the images would not sit on the input's origin."""
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", "The 'coordinate_transformations' argument",
+                                DeprecationWarning)
+        yield
+
+
 def write_ngff(path, labels, curvature, frame: Frame) -> Path:
     """Write `labels` and `curvature` ((X, Y, Z) numpy or Dask arrays, one shape) as
     the OME-Zarr image `path` (a new folder; its parent must exist)."""
@@ -62,20 +99,13 @@ def write_ngff(path, labels, curvature, frame: Frame) -> Path:
     if tuple(labels.shape) != tuple(curvature.shape) or len(labels.shape) != 3:
         raise ValueError(f"`labels` {labels.shape} and `curvature` {curvature.shape} must be "
                          "3-D volumes of one shape")
-    levels = pyramid_levels(labels.shape)
     spacing = np.array(frame.spacing)[::-1]            # z, y, x
     origin = frame.affine[:3, 3][::-1]
-    axes = [{"name": name, "type": "space", **({"unit": frame.unit} if frame.unit else {})}
-            for name in "zyx"]
-
-    def zyx(array):
-        array = array if hasattr(array, "dask") else da.from_array(np.asarray(array),
-                                                                 chunks=NGFF_CHUNK)
-        return array.transpose(2, 1, 0).rechunk(NGFF_CHUNK)
-
-    label_levels, mean_levels = [zyx(labels)], [zyx(curvature).astype(np.float32)]
+    axes = _space_axes("zyx", [frame.unit] * 3)
+    label_levels = _label_pyramid(labels, (2, 1, 0))
+    levels = len(label_levels) - 1
+    mean_levels = [_level0(curvature, (2, 1, 0)).astype(np.float32)]
     for _ in range(levels):
-        label_levels.append(label_levels[-1][::2, ::2, ::2].rechunk(NGFF_CHUNK))
         mean_levels.append(da.coarsen(np.mean, mean_levels[-1], {0: 2, 1: 2, 2: 2},
                                       trim_excess=True).astype(np.float32).rechunk(NGFF_CHUNK))
     # Level i's voxel size is 2^i of level 0's; nearest sampling keeps level 0's first
@@ -84,11 +114,7 @@ def write_ngff(path, labels, curvature, frame: Frame) -> Path:
     mean_transforms = [_transforms(spacing * 2**i, origin + spacing * (2**i - 1) / 2)
                        for i in range(levels + 1)]
     root = zarr.open_group(str(path), mode="w-")
-    with warnings.catch_warnings():
-        # ome-zarr 0.18 deprecates `coordinate_transformations` for `scale`, which has
-        # no translation: without it the labels would not sit on the input's origin.
-        warnings.filterwarnings("ignore", "The 'coordinate_transformations' argument",
-                                DeprecationWarning)
+    with _with_translations():
         write_multiscale(mean_levels, root, name="curvature", axes=axes,
                          coordinate_transformations=mean_transforms, storage_options=STORAGE)
         write_multiscale_labels(label_levels, root, name="regions", axes=axes,
@@ -103,16 +129,23 @@ def _transforms(scale, translation) -> list:
             {"type": "translation", "translation": [float(t) for t in translation]}]
 
 
-def is_ome_image(path) -> bool:
-    """A folder holding an OME-Zarr (0.4 or 0.5) image: a group with ``multiscales``."""
+def ome_levels(path) -> int:
+    """How many resolution levels the OME-Zarr (0.4 or 0.5) image `path` lists; 0 for
+    anything that is not one (not a store, not a group, no ``multiscales``)."""
     import zarr
 
+    from .zarr_store import multiscales_of
+
     try:
-        group = zarr.open_group(str(path), mode="r")
-    except Exception:      # not a store, not a group: not an OME-Zarr image
-        return False
-    attrs = group.attrs.asdict()
-    return bool(attrs.get("multiscales") or (attrs.get("ome") or {}).get("multiscales"))
+        multiscales = multiscales_of(zarr.open_group(str(path), mode="r").attrs.asdict())
+        return len(multiscales[0]["datasets"]) if multiscales else 0
+    except Exception:      # not a store, not a group, malformed: not an image to list
+        return 0
+
+
+def is_ome_image(path) -> bool:
+    """A folder holding an OME-Zarr (0.4 or 0.5) image: a group with ``multiscales``."""
+    return ome_levels(path) > 0
 
 
 def recover_labels(image, name: str) -> None:
@@ -190,15 +223,13 @@ def write_labels_into(image, labels, *, name: str = "volseg", level: int = 0,
         _recover(root, name)
         if target.exists() and not force:
             raise OutputError(f"{target} exists: give --force to replace it")
-        _write_labels(labels, labels_group, root, name, order, shape, fmt, axes, factors, origin,
-                      units)
+        _write_labels(labels, labels_group, root, name, order, fmt, axes, factors, origin, units)
     return target
 
 
-def _write_labels(labels, labels_group, root, name, order, shape, fmt, axes, factors, origin,
+def _write_labels(labels, labels_group, root, name, order, fmt, axes, factors, origin,
                   units) -> None:
     """`write_labels_into`'s writing, under its lock: staged, renamed, listed."""
-    import dask.array as da
     import zarr
 
     with warnings.catch_warnings():
@@ -206,20 +237,12 @@ def _write_labels(labels, labels_group, root, name, order, shape, fmt, axes, fac
         from ome_zarr.writer import add_metadata, get_metadata, write_multiscale
 
     target, staging = root / name, root / f".{name}.volseg-staging"
-    levels = [labels if hasattr(labels, "dask") else
-              da.from_array(np.asarray(labels), chunks=NGFF_CHUNK)]
-    levels[0] = levels[0].transpose(*order).rechunk(NGFF_CHUNK)
-    for _ in range(pyramid_levels(shape)):
-        levels.append(levels[-1][::2, ::2, ::2].rechunk(NGFF_CHUNK))
-    axes_meta = [{"name": a, "type": "space", **({"unit": u} if u else {})}
-                 for a, u in zip(axes, units, strict=True)]
+    levels = _label_pyramid(labels, order)
     transforms = [_transforms(np.array(factors) * 2**i, origin) for i in range(len(levels))]
-    with warnings.catch_warnings():
-        warnings.filterwarnings("ignore", "The 'coordinate_transformations' argument",
-                                DeprecationWarning)
+    with _with_translations():
         write_multiscale(levels, labels_group.create_group(staging.name), fmt=fmt,
-                         axes=axes_meta, coordinate_transformations=transforms, name=name,
-                         storage_options=STORAGE)
+                         axes=_space_axes(axes, units), coordinate_transformations=transforms,
+                         name=name, storage_options=STORAGE)
     staged = zarr.open_group(str(staging), mode="r+")
     add_metadata(staged, {"image-label": {"version": fmt.version,
                                           "source": {"image": "../../"}}}, fmt=fmt)

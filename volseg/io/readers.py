@@ -26,7 +26,7 @@ from ._files import (
 )
 from .volume import Frame, Volume, VolumeFileError, length_unit
 
-__all__ = ["read_volume", "DTYPES"]
+__all__ = ["read_volume", "is_tiff_folder", "DTYPES"]
 
 #: dtype names accepted in raw file names and by ``dtype=``.
 DTYPES = {
@@ -413,8 +413,9 @@ def _lazy(path, data: NDArray, chunks):
     return da.from_array(_check(path, data), chunks=chunks)
 
 
-def _is_tiff_folder(path: Path) -> bool:
+def is_tiff_folder(path) -> bool:
     """A folder of .tif / .tiff slices (and nothing that makes it a Zarr store)."""
+    path = Path(path)
     try:
         return path.is_dir() and any(p.suffix.lower() in (".tif", ".tiff")
                                      for p in path.iterdir())
@@ -542,7 +543,7 @@ def read_volume(path, *, shape=None, dtype=None, byte_order=None,
                          ome_level=ome_level, fill_missing_chunks=fill_missing_chunks)
     if channel is not None or ome_level is not None:
         raise ValueError(f"{path}: `channel` and `ome_level` apply to OME-Zarr images only")
-    reader = _read_tiff if _is_tiff_folder(path) else _reader(path)
+    reader = _read_tiff if is_tiff_folder(path) else _reader(path)
     if reader is not _read_tiff or not path.is_dir():
         regular_file_size(path)  # missing, a folder, a device or a pipe: refused before opening
     try:

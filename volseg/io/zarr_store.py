@@ -34,13 +34,18 @@ def is_zarr(path) -> bool:
         return False
 
 
+def multiscales_of(attrs: dict):
+    """The ``multiscales`` list of an OME-Zarr group's attributes: NGFF 0.4 keeps it at
+    the top, 0.5 under ``ome``; None when there is none."""
+    return attrs.get("multiscales") or (attrs.get("ome") or {}).get("multiscales")
+
+
 def _ome_level(group, path, level=None):
     """(the array, its axis names, voxel sizes, origin and length units per axis) of
-    an OME-Zarr image's level `level` (default 0): NGFF 0.4 (``multiscales`` in the
-    attributes) or 0.5 (under ``ome``), the dataset's scale and translation composed
-    with the multiscale's own."""
-    attrs = group.attrs.asdict()
-    multiscales = attrs.get("multiscales") or (attrs.get("ome") or {}).get("multiscales")
+    an OME-Zarr image's level `level` (default 0): NGFF 0.4 or 0.5
+    (`multiscales_of`), the dataset's scale and translation composed with the
+    multiscale's own."""
+    multiscales = multiscales_of(group.attrs.asdict())
     if not multiscales:
         raise VolumeFileError(f"{path}: a Zarr group without OME-Zarr 'multiscales' metadata; "
                               "give the path of the array inside it")

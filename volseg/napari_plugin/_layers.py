@@ -14,7 +14,7 @@ import numpy as np
 
 from ..io import Frame, Volume
 
-__all__ = ["to_layer", "frame_kwargs", "layer_volume", "LayerVolume"]
+__all__ = ["to_layer", "frame_kwargs", "LayerVolume"]
 
 #: The axes of every layer volseg makes.
 AXES = ("z", "y", "x")
@@ -98,11 +98,6 @@ def _layer_frame(layer) -> Frame:
     physical = Affine(scale=layer.scale, translate=layer.translate, rotate=layer.rotate,
                       shear=layer.shear).affine_matrix
     return Frame(np.asarray(layer.affine.affine_matrix) @ physical)
-
-
-def layer_volume(layer) -> LayerVolume:
-    """`LayerVolume` of an image layer."""
-    return LayerVolume(layer)
 
 
 def _stem(name: str) -> str:

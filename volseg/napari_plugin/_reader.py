@@ -11,6 +11,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import MissingChunksError, VolsegError
+from ..io.ngff import ome_levels
+from ..io.readers import is_tiff_folder
 from ..outputs import BLOCKWISE_SUFFIXES, NGFF_SUFFIX, OUTPUT_SUFFIXES
 from ._layers import frame_kwargs, to_layer
 
@@ -31,7 +33,7 @@ def napari_get_reader(path):
     path = Path(path)
     if path.name.endswith(_SUMMARY):
         return read if _is_volseg_summary(path) else None
-    if path.is_dir() and not path.name.lower().endswith(".zarr") and not _tiff_folder(path):
+    if path.is_dir() and not path.name.lower().endswith(".zarr") and not is_tiff_folder(path):
         return None
     return read
 
@@ -98,10 +100,6 @@ def _is_volseg_summary(path: Path) -> bool:
     return isinstance(info, dict) and "volseg_version" in info and "n_regions" in info
 
 
-def _tiff_folder(path: Path) -> bool:
-    return any(p.suffix.lower() in (".tif", ".tiff") for p in path.iterdir())
-
-
 def _output_set(summary: Path) -> list[tuple]:
     """The curvature and labels beside `summary`: the Zarr stores of a blockwise run,
     else the NIfTI files."""
@@ -121,22 +119,12 @@ def _ngff_output(path: Path) -> list[tuple]:
     stem = path.name[: -len(NGFF_SUFFIX)]
     layers = []
     for sub, kind, layer_type in (("", "curvature", "image"), (NGFF_LABELS, "labels", "labels")):
-        levels = [_load(path / sub, ome_level=level) for level in range(_levels(path / sub))]
+        levels = [_load(path / sub, ome_level=level)
+                  for level in range(max(ome_levels(path / sub), 1))]
         data = [to_layer(level.data) for level in levels]
         layers.append(_result_layer(data if len(data) > 1 else data[0], f"{stem} {kind}",
                                     layer_type, frame_kwargs(levels[0].frame)))
     return layers
-
-
-def _levels(image: Path) -> int:
-    """How many resolution levels an OME-Zarr image lists (1 if it lists none: the
-    reader of level 0 then names the problem)."""
-    try:
-        with open(image / "zarr.json", encoding="utf-8") as file:
-            attributes = json.load(file).get("attributes", {})
-        return max(1, len(attributes["ome"]["multiscales"][0]["datasets"]))
-    except (OSError, ValueError, KeyError, IndexError, TypeError, AttributeError):
-        return 1
 
 
 #: The curvature's contrast limits are percentiles of at most about this many voxels.

@@ -40,7 +40,7 @@ from qtpy.QtWidgets import (
 from ..curvature import OPERATORS
 from ..morse import MEASURES
 from ..segment import DEFAULT_MEASURE, DEFAULT_REGIONS
-from ._layers import layer_volume
+from ._layers import LayerVolume
 from ._live import Cancelled, LiveSegmentation, Options
 
 __all__ = ["SegmentWidget"]
@@ -217,7 +217,7 @@ class SegmentWidget(QWidget):
             self.status.setText("no image layer to segment")
             return
         try:
-            source = layer_volume(self.viewer.layers[name])
+            source = LayerVolume(self.viewer.layers[name])
         except ValueError as err:
             self.status.setText(str(err))
             return
