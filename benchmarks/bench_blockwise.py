@@ -123,6 +123,22 @@ def labels_of(folder: Path, stem: str):
     return nibabel.load(folder / f"{stem}_labels.nii.gz").dataobj
 
 
+def print_stages(blockwise: dict) -> None:
+    """A cluster run's stages: seconds, bytes its workers sent (to each other and to
+    the client) and bytes the client received; then the Morse phases."""
+    stages = blockwise.get("cluster_stages") or []
+    if stages:
+        print("  | stage | s | workers sent MB | client received MB |")
+        print("  | --- | --- | --- | --- |")
+        for s in stages:
+            sent = s["workers_sent_bytes"]
+            sent = "?" if sent is None else f"{sent / 1e6:.1f}"
+            print(f"  | {s['stage']} | {s['seconds']:.1f} | {sent} "
+                  f"| {s['client_received_bytes'] / 1e6:.1f} |")
+    for phase, seconds in (blockwise.get("morse_phases_s") or {}).items():
+        print(f"  Morse phase {phase}: {seconds:.1f} s")
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--sizes", type=int, nargs="+", default=[256, 512])
@@ -136,6 +152,9 @@ def main(argv=None) -> int:
     parser.add_argument("--repeat", type=int, default=1,
                         help="runs of every case, interleaved; the fastest is reported")
     parser.add_argument("--base", help="also run every case with this git revision's volseg")
+    parser.add_argument("--memory-limit",
+                        help="volseg segment --memory-limit for the blockwise runs (with "
+                             "local: shared by its workers)")
     args = parser.parse_args(argv)
     if args.base:
         from _common import worktree
@@ -161,7 +180,8 @@ def _main(args, trees) -> int:
                   [str(npy_path), "--mask", "none"])] if in_memory else []
         plain += [(f"blockwise {args.chunks}^3 {scheduler}", workers,
                    folder / f"blk{n}_{scheduler}_{workers}{tag}",
-                   [str(zarr_path), "--scheduler", scheduler, "--workers", str(workers)])
+                   [str(zarr_path), "--scheduler", scheduler, "--workers", str(workers),
+                    *(["--memory-limit", args.memory_limit] if args.memory_limit else [])])
                   for scheduler in args.schedulers for workers in args.workers]
         cases = [(path if tree == "now" else f"{path} [base]", workers,
                   out.with_name(out.name + ("" if tree == "now" else "_base")), arguments, tree)
@@ -198,6 +218,7 @@ def _main(args, trees) -> int:
                       f"{result['seconds']:.1f} s, peak {result['peak_gb']:.2f} GB "
                       f"(client {result['client_gb']:.2f} GB), "
                       f"same labels as in memory: {same}", flush=True)
+                print_stages(summary.get("blockwise", {}))
         rows += best.values()
         by_workers = {w: r["seconds"] for (p, w), r in best.items()
                       if p.startswith("blockwise") and not p.endswith("[base]")}

@@ -44,3 +44,11 @@ def write_atomically(path, save, *args, durable: bool = False, **kwargs) -> None
         except OSError:
             pass
         raise
+
+
+#: CPython 3.11's AST constructor keeps one recursion depth per interpreter, so two
+#: threads parsing at once can fail with "SystemError: AST constructor recursion depth
+#: mismatch" (python/cpython#106905). numpy parses every .npy header with
+#: `ast.literal_eval`, so the blocks the threaded engine's workers read back are read
+#: one at a time (a few ms each, beside seconds of work per block).
+NPY_READ_LOCK = threading.Lock()

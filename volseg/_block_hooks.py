@@ -24,6 +24,12 @@ def _dask_compute(*collections, stage: str):
     return dask.compute(*collections)
 
 
+def _dask_persist(*collections, stage: str):
+    import dask
+
+    return dask.persist(*collections)
+
+
 @dataclass(frozen=True)
 class BlockHooks:
     """What a blockwise stage asks of its storage.
@@ -35,6 +41,9 @@ class BlockHooks:
         them instead of computing them again (`volseg.blockwise.WorkFolder.wrap`).
     compute : callable ``(*collections, stage=name) -> results``
         Computes Dask collections (e.g. with a progress bar per stage).
+    persist : callable ``(*collections, stage=name) -> collections``
+        Computes Dask collections and keeps them where they were computed (on a
+        cluster, its workers), for later graphs to use without the client holding them.
     store : callable ``(stage, blocks) -> blocks``, optional
         Computes a lazy array once into storage and returns it read back, so later
         passes read it instead of computing it again. None: kept lazy.
@@ -48,6 +57,7 @@ class BlockHooks:
 
     wrap: Callable = _unwrapped
     compute: Callable = _dask_compute
+    persist: Callable = _dask_persist
     store: Callable | None = None
     reread: bool = False
     scratch: str | None = None

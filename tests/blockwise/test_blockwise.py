@@ -67,7 +67,8 @@ def quantized(volume, step=0.05):
 
 
 def assert_same_hierarchy(lazy, eager):
-    for name in ("maxima", "values", "young", "elder", "target", "saddle", "saddle_value"):
+    for name in ("maxima", "values", "young", "elder", "target", "source", "saddle",
+                 "saddle_value"):
         assert np.array_equal(getattr(lazy, name), getattr(eager, name)), name
     assert np.array_equal(lazy.persistence, eager.persistence)
     assert np.array_equal(lazy.cells.compute(), eager.cells)
@@ -274,7 +275,7 @@ def test_the_stage_sequence_with_blockwise_storage_equals_in_memory(tmp_path, sm
     assert np.array_equal(np.asarray(result.labels), eager.labels)
     assert np.array_equal(np.asarray(result.curvature), eager.curvature)
     assert paths["labels"].exists() and paths["curvature"].exists()   # stored as it went
-    for stage in ("smoothed", "curvature", "ascent", "cells", "pairs"):
+    for stage in ("smoothed", "curvature", "ascent", "cells", "forests"):
         assert storage.work.finished(stage) == lazy.npartitions, stage
     assert set(result.timings) == set(eager.timings) == {"curvature", "morse", "cut", "labels"}
     assert any("smoothing" in line for line in said)

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .._atomic import write_atomically
+from .._atomic import NPY_READ_LOCK, write_atomically
 
 __all__ = ["WorkFolder"]
 
@@ -97,7 +97,8 @@ def _load(path):
     import zipfile
 
     try:
-        with open(path, "rb") as file, np.load(file) as saved:   # closed on any error
+        # (closed on any error)
+        with NPY_READ_LOCK, open(path, "rb") as file, np.load(file) as saved:
             if "array" in saved.files:
                 return saved["array"]
             items = tuple(saved[f"item{i}"] for i in range(len(saved.files)))

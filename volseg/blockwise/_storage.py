@@ -16,12 +16,13 @@ before from disk instead, inside the output set's staging folder:
    (float64, so that the Morse stage reads exactly what it would in memory);
 3. the Morse hierarchy from that store (two passes over its blocks with their
    halos, the ascent's per-voxel path ends kept in the work folder until the cells
-   are computed from them, once; the cell graph on this process);
+   are computed from them, once; the maxima's ids, the exits and the union-find on
+   the workers, in a tree of block groups; the hierarchy on this process);
 4. the labels, block by block, written to ``<stem>_labels.zarr``.
 
 The output set's writer (`volseg.outputs`) then adds the summary, the preview and,
 for a small volume, the NIfTI files. Nothing is ever whole in memory but the
-per-maximum data and the cell graph.
+hierarchy (the per-maximum data and the merge events).
 
 Every per-block result (smoothed values, curvature, ascent summaries and path ends,
 cells, edges) is also kept in ``<out>/.<stem>.volseg-work``
@@ -86,6 +87,7 @@ class BlockwiseStorage(Storage):
         #: The blocks' edge per axis, as the messages and the summary give it ("64x64x64").
         self.chunks = "x".join(str(max(c)) for c in data.chunks)
         self._run = engine.compute if engine is not None else BlockHooks().compute
+        self._persist = engine.persist if engine is not None else BlockHooks().persist
 
     def begin(self, choice, request=None):
         """The work folder (keyed by everything that changes a block), after the free
@@ -100,13 +102,15 @@ class BlockwiseStorage(Storage):
             "operator": request.operator.name, "value_scale": request.value_scale,
             "padding": request.padding, "connectivity": "kuhn",
             "smooth": request.smooth_sigma, "mask": choice.used,
-            "block_layout": 4})   # 3: ascent ends kept; 4: one stage sequence
+            # 3: ascent ends kept; 4: one stage sequence; 5: forests with faces
+            "block_layout": 5})
         if self.work.resumed:
             done = ", ".join(f"{stage} {self.work.finished(stage)}" for stage in
-                             ("smoothed", "curvature", "ascent", "cells", "pairs"))
+                             ("smoothed", "curvature", "ascent", "cells", "forests"))
             self.say(f"resuming from finished blocks in {self.work.folder} ({done})")
-        self.block_hooks = BlockHooks(wrap=self.work.wrap, compute=self._run, store=self._store,
-                                      reread=True, scratch=str(self.work.folder / "ends"))
+        self.block_hooks = BlockHooks(wrap=self.work.wrap, compute=self._run,
+                                      persist=self._persist, store=self._store, reread=True,
+                                      scratch=str(self.work.folder / "ends"))
 
     def _store(self, stage: str, blocks):
         """Blocks wrapped by ``work.wrap(stage, ...)``, computed once into the work
@@ -144,7 +148,8 @@ class BlockwiseStorage(Storage):
                 "engine": self.engine.describe() if self.engine else "dask",
                 "resumed": self.work.resumed,
                 "morse_phases_s": {phase: round(seconds, 4)
-                                   for phase, seconds in hierarchy.timings.items()}}
+                                   for phase, seconds in hierarchy.timings.items()},
+                "cluster_stages": list(self.engine.stages) if self.engine else []}
 
     def finish(self):
         """The set is committed: the finished blocks are no longer needed."""

@@ -37,6 +37,7 @@ import contextlib
 import math
 import os
 import sys
+import time
 from concurrent.futures import ThreadPoolExecutor
 
 from ..errors import EngineError  # noqa: F401 (re-exported)
@@ -138,6 +139,9 @@ class Engine:
         self.timeout = CONNECT_TIMEOUT if timeout is None else timeout
         self.client = None
         self._stack = contextlib.ExitStack()
+        #: Per compute on a cluster: the stage, its seconds, the bytes its workers sent
+        #: (to each other and to the client) and the bytes the client received.
+        self.stages: list[dict] = []
 
     @property
     def threaded(self) -> bool:
@@ -249,7 +253,20 @@ class Engine:
             with ProgressBar(out=sys.stderr, minimum=1.0):
                 return dask.compute(*collections)
 
-    def _watched(self, collections, stage: str):
+    def persist(self, *collections, stage: str = "computing"):
+        """`dask.persist(*collections)` (Delayed): computed now, with the progress of
+        `compute`, and kept where each was computed (on a cluster, in its workers'
+        memory: the client receives none of it) for later graphs to read."""
+        import dask
+
+        if self.client is None:
+            if self.progress:
+                print(f"  {stage}", file=sys.stderr, flush=True)
+            return dask.persist(*collections)
+        futures = self._watched(collections, stage, gather=False)
+        return tuple(dask.delayed(future) for future in futures)
+
+    def _watched(self, collections, stage: str, gather: bool = True):
         """The distributed compute of `compute`, stopped with one line when the
         cluster cannot go on: a task whose workers died `KilledWorker` times (over
         their memory limit), or every worker paused at its limit for `STALL_SECONDS`
@@ -258,6 +275,7 @@ class Engine:
 
         from distributed import KilledWorker, progress
 
+        start, sent = time.perf_counter(), self._sent()
         futures = self.client.compute(list(collections))
         watchdog = _Watchdog(self.client, futures, STALL_SECONDS)
         try:
@@ -266,7 +284,18 @@ class Engine:
                     with contextlib.redirect_stdout(sys.stderr):
                         progress(futures, notebook=False)
                         print(file=sys.stderr)
-                return tuple(self.client.gather(futures))
+                if gather:
+                    results = tuple(self.client.gather(futures))
+                else:
+                    from distributed import wait
+
+                    wait(futures)
+                    for future in futures:     # raise a task's error here, as gather would
+                        if future.status == "error":
+                            future.result()
+                    results = futures
+                self._record(stage, start, sent, results if gather else ())
+                return results
         except KilledWorker:
             self.client.cancel(futures)
             raise self._over_limit(f"{stage}: {_KILLED}") from None
@@ -275,6 +304,21 @@ class Engine:
                 raise
             raise self._over_limit(f"{stage}: {watchdog.reason}") from None
 
+    def _sent(self) -> int:
+        """The bytes every worker has sent so far (to other workers and to clients)."""
+        try:
+            return sum(self.client.run(_bytes_sent).values())
+        except Exception:  # noqa: BLE001 - a worker gone: the figure is only a report
+            return -1
+
+    def _record(self, stage, start, sent, results):
+        from dask.sizeof import sizeof
+
+        after = self._sent() if sent >= 0 else -1
+        self.stages.append({"stage": stage, "seconds": round(time.perf_counter() - start, 3),
+                            "workers_sent_bytes": after - sent if after >= 0 else None,
+                            "client_received_bytes": int(sum(sizeof(r) for r in results))})
+
     def _over_limit(self, what: str) -> EngineError:
         """The one line of a cluster stopped at its memory limit: `what` happened, the
         limit, and what to change."""
@@ -282,6 +326,10 @@ class Engine:
                  if self.scheduler == "local" else f"the cluster at {self.scheduler}")
         return EngineError(f"{what} ({limit}); give more --memory-limit, fewer --workers or "
                            "smaller --chunks")
+
+
+def _bytes_sent(dask_worker) -> int:
+    return int(dask_worker.transfer_outgoing_bytes_total)
 
 
 #: What `KilledWorker` means here: distributed gave up on a task after its workers died.

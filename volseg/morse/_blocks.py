@@ -7,9 +7,10 @@
    maximum of the block or leaves it; a path that leaves lands on a neighbouring
    block's outer layer. Each block returns its maxima and the ends of its outer
    layer's paths, a few percent of its voxels.
-2. On the client: the outer-layer ends are resolved to maxima by pointer jumping
-   (the chains follow strictly rising values, so they end), and the maxima are
-   numbered by decreasing (value, index), as in memory.
+2. On the workers (one graph, the client waits): the maxima numbered by decreasing
+   (value, index) as in memory, by a sample sort (`_ranks`); the outer-layer ends
+   resolved to those ids by pointer jumping in a tree of block groups (`_exits`), so
+   each block gets its own table. The tables stay on the workers (`hooks.persist`).
 3. Per block again: cells = maximum id of each voxel, from the path ends the ascent
    kept on disk (the hooks' `scratch` folder: the blockwise work folder), or, without
    one, by climbing again (so no block-sized intermediate outlives its task).
@@ -18,12 +19,15 @@
    lower end as saddle, reduced to the highest saddle per pair of cells), then the
    block's maximum spanning forest in the sweep order (value, saddle index, pair):
    the only edges that can merge components, about one per cell.
-5. On the client: the union of the blocks' forests (a pair found by two blocks stays
-   twice; the lower edge closes a cycle), the in-memory sort and the same Kruskal:
-   the same maxima, events and persistence as in memory, for any chunking (tested).
+5. On the workers: the elder-rule union-find decided in the same tree of block
+   groups (`_group_tree`): each group decides the events its faces cannot change and
+   passes the rest up. The client joins the decided events in sweep order: the same
+   maxima, events and persistence as in memory, for any chunking (tested).
 
 The returned `MorseHierarchy` holds the per-maximum data and the events in memory and
-its `cells` as a lazy Dask array; `segment` relabels block by block.
+its `cells` as a lazy Dask array; `segment` relabels block by block. The client's own
+share is that result (about 48 B per maximum): nothing else per maximum or per voxel
+comes to it.
 """
 
 from __future__ import annotations
@@ -37,8 +41,9 @@ import numpy as np
 from .. import _atomic
 from .._block_hooks import BlockHooks
 from .._halo import block_starts, with_halo
+from .._task_graph import TaskGraph
 from . import _block_kernels as kernels
-from . import _kernels
+from . import _exits, _group_tree, _kernels, _ranks
 from ._edges import _cross_edges, _saddle_order
 from ._graph import _Neighbourhood, grid_offsets
 from ._hierarchy import MorseHierarchy
@@ -100,22 +105,9 @@ def _summary_of_block(halo, origin, shape, offsets, masked, ends_file=None):
     return (gids.ravel()[is_max], inner[is_max], gids.ravel()[layer], flat[layer])
 
 
-def _resolve(keys, ends):
-    """Pointer jumping: each outer-layer voxel's end resolved to a maximum gid."""
-    order = np.argsort(keys)
-    keys, ends = keys[order], ends[order]      # (copies: ends is written below)
-    for _ in range(64):
-        leaving = ends < 0
-        if not leaving.any():
-            return keys, ends
-        where = np.searchsorted(keys, -1 - ends[leaving])
-        ends[leaving] = ends[where]
-    raise RuntimeError("blockwise Morse: path ends did not resolve (a bug)")
-
-
 def _cells_of_block(halo, origin, shape, offsets, masked, keys, ids):
     """Stage 3: the maximum id of every owned voxel, from the block's own table
-    (`_block_tables`); -1 outside the mask."""
+    (`_exits.table`); -1 outside the mask."""
     result, _ = _ascend(halo, origin, shape, offsets, masked)
     return _cells_of_ends(result, keys, ids)
 
@@ -127,27 +119,10 @@ def _cells_of_ends(result, keys, ids):
     return cells.reshape(result.shape)
 
 
-def _block_tables(summaries, layer_keys, layer_ends, maxima_sorted, maxima_ids):
-    """Per block, the maximum id of every end its paths reach: its own maxima (by gid)
-    and the neighbours' outer-layer voxels its paths exit to (by their gid; a path from
-    inside leaves through the block's own outer layer, so these are that layer's
-    exits). Each block's task then carries its own small table, not the whole
-    volume's outer layers and maxima (which every worker would otherwise hold)."""
-    tables = []
-    for summary in summaries:
-        own, ends = summary.maxima, summary.ends
-        exits = np.unique(-1 - ends[ends < 0])
-        reached = layer_ends[np.searchsorted(layer_keys, exits)]
-        keys = np.concatenate([own, exits])
-        gids = np.concatenate([own, reached])
-        order = np.argsort(keys)
-        tables.append((keys[order], maxima_ids[np.searchsorted(maxima_sorted, gids[order])]))
-    return tables
-
-
 def _pairs_of_block(halo_values, halo_cells, origin, shape, offsets):
     """Stage 4: (a, b, saddle gid, saddle value) of the block's edges of the cell
-    graph's maximum spanning forest: about one edge per cell.
+    graph's maximum spanning forest (about one edge per cell), then its six faces'
+    cells (`_faces`).
 
     The in-memory cross-edge pass (`_edges._cross_edges`) runs on the block with its
     halo as the padded field: the owned voxels in the mask are its vertices, the halo
@@ -156,16 +131,17 @@ def _pairs_of_block(halo_values, halo_cells, origin, shape, offsets):
     one of them. Cells are renumbered in increasing order (the pairs and ties keep the
     in-memory order), the highest saddle per pair is sorted as in memory and
     `spanning_edges` keeps the block's forest."""
+    faces = _faces(halo_cells, origin, shape)
     values = np.ascontiguousarray(halo_values, dtype=np.float64)
     cells, local = np.unique(halo_cells, return_inverse=True)
     strides = np.array([s // values.itemsize for s in values.strides], dtype=np.int64)
     owned = np.arange(values.size).reshape(values.shape)[1:-1, 1:-1, 1:-1].ravel()
     owned = owned[values.ravel()[owned] > -np.inf]         # the block's voxels in the mask
-    # 4-byte voxel ids below 2^31 voxels (up to 1290^3): the client holds ~1 per maximum
+    # 4-byte voxel ids below 2^31 voxels (up to 1290^3)
     gid_type = np.int32 if np.prod(shape) < 2**31 else np.int64
     if not len(owned):
         nothing = np.zeros(0, dtype=halo_cells.dtype)
-        return nothing, nothing, np.zeros(0, dtype=gid_type), np.zeros(0)
+        return (nothing, nothing, np.zeros(0, dtype=gid_type), np.zeros(0), *faces)
     graph = _Neighbourhood(values.ravel(), owned, True, offsets @ strides,
                            np.zeros(1, np.int64), np.zeros(1, np.int64), values.shape)
     a, b, saddle = _cross_edges(graph, local.ravel(), len(cells))
@@ -175,7 +151,27 @@ def _pairs_of_block(halo_values, halo_cells, origin, shape, offsets):
     a, b, saddle = a[keep], b[keep], saddle[keep]
     i, j, k = np.unravel_index(saddle, values.shape)
     gids = ((origin[0] + i - 1) * shape[1] + origin[1] + j - 1) * shape[2] + origin[2] + k - 1
-    return cells[a], cells[b], gids.astype(gid_type), graph.values[saddle]
+    return (cells[a], cells[b], gids.astype(gid_type), graph.values[saddle], *faces)
+
+
+def _faces(halo_cells, origin, shape) -> list:
+    """The cells on each face of a block, in its outer layer or in the halo beyond it
+    (axis 0 low, axis 0 high, axis 1 low, ...): the cells that may have edges found by
+    the neighbour across that face (`_group_tree`). Empty on the volume's boundary,
+    where there is no neighbour."""
+    faces = []
+    for axis in range(3):
+        for end in (0, 1):
+            outer = origin[axis] == 0 if end == 0 else \
+                origin[axis] + halo_cells.shape[axis] - 2 == shape[axis]
+            if outer:
+                faces.append(np.zeros(0, dtype=halo_cells.dtype))
+                continue
+            index = [slice(None)] * 3
+            index[axis] = slice(0, 2) if end == 0 else slice(-2, None)
+            cells = np.unique(halo_cells[tuple(index)])
+            faces.append(cells[cells >= 0])
+    return faces
 
 
 def _per_block(function, *arrays, **kwargs):
@@ -193,40 +189,9 @@ def _per_block(function, *arrays, **kwargs):
                          meta=np.empty((0,) * 3, object))
 
 
-def _gather(blocks, compute, stage) -> list:
-    """The per-block results of `_per_block`, in block order, each fetched as its own
-    result: no task concatenates them first (on a cluster, that task's worker would
-    hold every block's result at once)."""
-    results = compute(*blocks.to_delayed(optimize_graph=False).ravel(), stage=stage)
-    return [block.flat[0] for block in results]      # each a 1x1x1 object array
-
-
-@dataclass
-class _Ascent:
-    """Stage 1 of one block: its maxima (gids) and their values, its outer layer's
-    voxels (gids) and where their paths end (a gid, or -1 - gid of the exit voxel in a
-    neighbouring block). Fields are dropped (None) once joined on the client."""
-
-    maxima: np.ndarray | None
-    values: np.ndarray | None
-    layer: np.ndarray | None
-    ends: np.ndarray | None
-
-
-@dataclass
-class _Forest:
-    """Stage 4 of one block: the edges (a, b, saddle gid, saddle value) of its part of
-    the cell graph's maximum spanning forest."""
-
-    a: np.ndarray | None
-    b: np.ndarray | None
-    saddle: np.ndarray | None
-    value: np.ndarray | None
-
-
 @dataclass
 class _Maxima:
-    """Stage 2, on the client: every maximum (gid) and its value, by decreasing
+    """Stage 2's result on the client: every maximum (gid) and its value, by decreasing
     (value, index) (a maximum's id is its position), and the index type of the ids."""
 
     gids: np.ndarray
@@ -247,6 +212,12 @@ class _Grid:
 
     def origin(self, block_id):
         return np.array([self.starts[d][block_id[d]] for d in range(3)], dtype=np.int64)
+
+    def voxel(self, block) -> tuple:
+        """The first voxel of the block at block coordinates `block` (or the volume's
+        end past the last block)."""
+        return tuple(int(self.starts[d][block[d]]) if block[d] < len(self.starts[d])
+                     else int(self.shape[d]) for d in range(3))
 
     def ends_file(self, block_id):
         if self.scratch is None:
@@ -281,29 +252,24 @@ def dask_descending_complex(field, connectivity="kuhn", mask=None, hooks=None):
     ascent = _per_block(hooks.wrap("ascent", lambda h, block_id: _summary_of_block(
         h, grid.origin(block_id), grid.shape, grid.offsets, grid.masked,
         grid.ends_file(block_id))), halo)
-    summaries = [_Ascent(*s) for s in _gather(ascent, hooks.compute,
-                                              "Morse: steepest ascent per block")]
-    phases.done("blocks: steepest ascent, path compression")
-    maxima, tables = _maxima_and_tables(summaries, values.chunks)
-    del summaries     # the client keeps only the maxima and the blocks' small tables
-    phases.done("client: exits resolved, maxima ordered")
+    tables, maxima = _ids_and_exits(ascent, grid, hooks)
+    phases.done("blocks and block groups: steepest ascent, maxima ids, exits")
     cells = _cells(halo, tables, values.chunks, grid, maxima.index_type, hooks)
-    del tables     # held by the cells' graph only: storing may free them (about 12 B/maximum)
+    del tables     # held by the cells' graph only: storing may free them
     if hooks.store is not None:
         cells = hooks.store("cells", cells)
         phases.done("blocks: cells (stored)")
         if grid.scratch is not None:    # every cell is stored: the ends are not read again
             shutil.rmtree(grid.scratch, ignore_errors=True)
     halo_cells = with_halo(cells, -1, fresh=hooks.store is not None)
-    pairs = _per_block(hooks.wrap("pairs", lambda h, c, block_id: _pairs_of_block(
+    forests = _per_block(hooks.wrap("forests", lambda h, c, block_id: _pairs_of_block(
         h, c, grid.origin(block_id), grid.shape, grid.offsets)), halo, halo_cells)
-    forests = [_Forest(*f) for f in _gather(
-        pairs, hooks.compute, "Morse: cross-cell edges and spanning forest per block")]
-    phases.done("blocks: cells and cross-cell edges")
-    young, elder, target, source, saddle, saddle_values = _union_find(
-        forests, len(maxima.gids), maxima.index_type)
-    del forests
-    phases.done("client: saddle order, union-find")
+    decided = hooks.compute(*_group_tree_of(forests),
+                            stage="Morse: cross-cell edges and union-find per block group")
+    phases.done("blocks: cells, cross-cell edges, union-find in block groups")
+    young, elder, target, source, saddle, saddle_values = _group_tree.assembled(list(decided))
+    del decided
+    phases.done("client: events in sweep order")
     return MorseHierarchy(
         shape=tuple(int(s) for s in grid.shape), cells=cells, maxima=maxima.gids,
         values=maxima.values, young=young, elder=elder, target=target, source=source, saddle=saddle,
@@ -333,30 +299,78 @@ def _checked_field(field, mask):
     return da.map_blocks(_masked, values, mask, dtype=np.float64), mask
 
 
-def _maxima_and_tables(summaries: list, chunks) -> tuple:
-    """Stage 2 on the client: the outer layers' path ends resolved to maxima by
-    pointer jumping, the maxima numbered by decreasing (value, index) as in memory,
-    and each block's own table of maximum ids (as a Dask array of the block grid)."""
+def _ids_and_exits(ascent, grid: _Grid, hooks) -> tuple:
+    """Stages 1-2 on the workers: the maxima numbered by decreasing (value, gid)
+    (`_ranks`), the exits resolved in the tree of block groups (`_exits`), each block's
+    table made (kept where it was computed: on a cluster's workers); returns (the tables
+    as a Dask object array of the block grid, `_Maxima`)."""
     import dask.array as da
 
-    maxima = np.concatenate([s.maxima for s in summaries])
-    if not len(maxima):
+    graph = TaskGraph("morse-ids", [ascent])
+    shape = ascent.numblocks
+    order = list(np.ndindex(shape))
+    summaries = {i: graph(_summary, (ascent.name, *i)) for i in order}
+    ranks, total, buckets = _ranks.ranks_of(graph, [graph(_maxima_of, summaries[i])
+                                                    for i in order], _buckets(len(order)))
+    ranks = dict(zip(order, ranks, strict=True))
+    groups = _group_tree.block_tree(shape)
+    face_map, exits, down, halves = [], [], {}, {}
+    for index, (lo, hi, axis, low, high) in enumerate(groups):
+        box = (grid.voxel(lo), grid.voxel(hi))
+        if axis is None:
+            up = graph(_exits.leaf_up, summaries[lo], ranks[lo], box, grid.shape)
+        else:
+            up = graph(_exits.group_up, face_map[low], exits[low], face_map[high], exits[high],
+                       box, grid.shape)
+            down[index], halves[index] = graph.item(up, 2), graph.item(up, 3)
+        face_map.append(graph.item(up, 0))
+        exits.append(graph.item(up, 1))
+    answers = {len(groups) - 1: graph(_no_answers)}
+    for index in range(len(groups) - 1, -1, -1):
+        _, _, axis, low, high = groups[index]
+        if axis is not None:
+            for half, child in enumerate((low, high)):
+                answers[child] = graph(_exits.answers_down, down[index], halves[index],
+                                       answers[index], half)
+    leaves = {groups[i][0]: answers[i] for i in range(len(groups)) if groups[i][2] is None}
+    tables = [graph(_one_block, graph(_exits.table, ranks[i], leaves[i])) for i in order]
+    *tables, total, buckets = hooks.persist(*graph.delayed([*tables, total, graph(list, buckets)]),
+                                            stage="Morse: steepest ascent, maxima ids, exits")
+    n_maxima, buckets = hooks.compute(total, buckets, stage="Morse: the maxima, in order")
+    if not n_maxima:
         raise ValueError("`mask` selects no vertex")
-    maxima_values = _joined(summaries, "values")
-    layer_keys, layer_ends = _resolve(_joined(summaries, "layer"),
-                                      np.concatenate([s.ends for s in summaries]))
-    order = np.lexsort((maxima, maxima_values))[::-1]       # decreasing (value, index)
-    maxima, maxima_values = maxima[order], maxima_values[order]
-    index_type = np.int32 if len(maxima) < 2**31 - 1 else np.int64
-    by_gid = np.argsort(maxima)
-    maxima_sorted, maxima_ids = maxima[by_gid], by_gid.astype(index_type)
-    block_grid = tuple(len(c) for c in chunks)
-    tables = np.empty(block_grid, dtype=object)
-    for index, table in zip(np.ndindex(block_grid), _block_tables(
-            summaries, layer_keys, layer_ends, maxima_sorted, maxima_ids), strict=True):
-        tables[index] = table
-    return (_Maxima(maxima, maxima_values, index_type),
-            da.from_array(tables, chunks=1, name=False))
+    grid_of_tables = np.empty(shape, dtype=object)
+    for index, table in zip(order, tables, strict=True):
+        grid_of_tables[index] = da.from_delayed(table, shape=(1, 1, 1), dtype=object)
+    return (da.block(grid_of_tables.tolist()),
+            _Maxima(np.concatenate([b[0] for b in buckets]),
+                    np.concatenate([b[1] for b in buckets]),
+                    np.int32 if n_maxima < 2**31 - 1 else np.int64))
+
+
+def _no_answers():
+    return np.zeros(0, np.int64), np.zeros(0, np.int64)
+
+
+def _one_block(item):
+    """`item` as the one element of a 1x1x1 object block."""
+    out = np.empty((1, 1, 1), dtype=object)
+    out[0, 0, 0] = item
+    return out
+
+
+def _summary(block):
+    return block.flat[0]
+
+
+def _maxima_of(summary):
+    return summary[0], summary[1]
+
+
+def _buckets(n_blocks: int) -> int:
+    """Buckets of the maxima's sample sort: enough that each stays small next to a block's
+    work, few enough that the blocks x buckets pieces stay a small graph."""
+    return max(1, min(32, n_blocks))
 
 
 def _cells(halo, tables, chunks, grid: _Grid, index_type, hooks):
@@ -367,53 +381,42 @@ def _cells(halo, tables, chunks, grid: _Grid, index_type, hooks):
     meta = np.empty((0, 0, 0), index_type)
     if grid.scratch is None:
         def cells_of(h, table, block_id=None):
+            keys, ids = table.flat[0]
             return _cells_of_block(h, grid.origin(block_id), grid.shape, grid.offsets,
-                                   grid.masked, *table.flat[0])
+                                   grid.masked, keys, ids.astype(index_type))
 
         return halo.map_blocks(hooks.wrap("cells", cells_of), tables, dtype=index_type,
                                chunks=chunks, meta=meta)
 
     def cells_of_kept_ends(table, block_id=None):
         try:
-            ends = np.load(grid.ends_file(block_id))
+            with _atomic.NPY_READ_LOCK:
+                ends = np.load(grid.ends_file(block_id))
         except OSError:
             raise RuntimeError(f"block {block_id}'s path ends were expected in "
                                f"{grid.scratch} but are not there") from None
-        return _cells_of_ends(ends, *table.flat[0])
+        keys, ids = table.flat[0]
+        return _cells_of_ends(ends, keys, ids.astype(index_type))
 
     return da.map_blocks(hooks.wrap("cells", cells_of_kept_ends), tables, dtype=index_type,
                          chunks=chunks, meta=meta)
 
 
-def _union_find(forests: list, n_maxima: int, index_type) -> tuple:
-    """Stage 5 on the client: the union of the blocks' forests holds the whole graph's
-    forest, so Kruskal over it in the in-memory order makes the in-memory merges (a
-    pair found by two blocks: the lower edge is skipped). Joined one column at a
-    time, each block's copy dropped as it goes (the peak is one column more than the
-    edges, not twice the edges). Returns (young, elder, target, source, saddle, saddle
-    value)."""
-    edge_a, edge_b, edge_v, edge_f = (_joined(forests, k) for k in ("a", "b", "saddle", "value"))
-    edge_a, edge_b = edge_a.astype(index_type, copy=False), edge_b.astype(index_type, copy=False)
-    order = _saddle_order(edge_f, edge_v, edge_a, edge_b)
-    edge_a = edge_a[order]      # one column at a time: one copy alive, not four
-    edge_b = edge_b[order]
-    edge_v = edge_v[order]
-    edge_f = edge_f[order]
-    del order
-    out = [np.empty(max(n_maxima - 1, 0), dtype=t)
-           for t in (np.int32, np.int32, np.int32, np.int32, np.int64)]
-    # Kruskal records each event's edge (its index in place of a saddle): the events'
-    # saddles and their values are then two gathers.
-    edge = np.arange(len(edge_a), dtype=index_type if len(edge_a) < 2**31 - 1 else np.int64)
-    n_events = _kernels.kruskal(edge_a, edge_b, edge, n_maxima, *out)
-    del edge_a, edge_b, edge
-    young, elder, target, source, event_edge = (x[:n_events].copy() for x in out)
-    return young, elder, target, source, edge_v[event_edge].astype(np.int64), edge_f[event_edge]
+def _group_tree_of(forests) -> list:
+    """Stage 5, lazy: the union-find decided in the tree of block groups
+    (`_group_tree`), one task per group; the events each group decides, as a list of
+    Delayed (the undecided part goes from task to task, never to the client)."""
+    graph = TaskGraph("morse-groups", [forests])
+    groups, decided = [], []
+    for group_id, (lo, _, axis, low, high) in enumerate(_group_tree.block_tree(forests.numblocks)):
+        if axis is None:
+            node = graph(_leaf, (forests.name, *lo), group_id)
+        else:
+            node = graph(_group_tree.merged, groups[low], groups[high], axis, group_id)
+        groups.append(graph.item(node, 1))
+        decided.append(graph.item(node, 0))
+    return graph.delayed(decided)
 
 
-def _joined(parts, name: str):
-    """Field `name` of every block's record, concatenated; each block's copy is dropped."""
-    column = np.concatenate([getattr(p, name) for p in parts])
-    for p in parts:
-        setattr(p, name, None)
-    return column
+def _leaf(block, group_id):
+    return _group_tree.leaf(block.flat[0], group_id)

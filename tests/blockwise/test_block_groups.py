@@ -1,0 +1,151 @@
+"""The blockwise build's global part on the workers (issue 30): the maxima's ids by a
+sample sort, the exits by pointer jumping in the tree of block groups, the union-find
+decided in the same tree. Exactly the in-memory hierarchy for every chunking (tiny
+blocks, so that the tree is deep and most cells touch a face), connectivity, ties and
+mask; and the tree decides most events below its root."""
+
+import dask
+import dask.array as da
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from volseg import descending_complex
+from volseg.morse import _blocks, _group_tree, _ranks
+
+from ..conftest import smooth_random_field
+from .test_blockwise import assert_same_hierarchy
+
+
+@pytest.fixture(autouse=True)
+def _synchronous():
+    with dask.config.set(scheduler="synchronous"):
+        yield
+
+
+@pytest.mark.parametrize("connectivity", ["kuhn", 6, 18, 26])
+@pytest.mark.parametrize("chunks", [(2, 2, 2), (3, 2, 5), (1, 7, 3)])
+def test_tiny_blocks_give_the_in_memory_hierarchy(connectivity, chunks):
+    rng = np.random.default_rng(3)
+    field = rng.integers(0, 4, size=(9, 8, 10)).astype(float)       # ties everywhere
+    eager = descending_complex(field, connectivity=connectivity)
+    lazy = descending_complex(da.from_array(field, chunks=chunks), connectivity=connectivity)
+    assert_same_hierarchy(lazy, eager)
+    for k in (1, 3, len(eager.maxima)):
+        assert np.array_equal(lazy.segment(n_regions=k).compute(), eager.segment(n_regions=k))
+
+
+@pytest.mark.parametrize("connectivity", ["kuhn", 26])
+def test_tiny_blocks_with_a_mask_of_several_components(connectivity):
+    rng = np.random.default_rng(4)
+    field = np.round(smooth_random_field((12, 11, 10), rng, sigma=1.0), 1)
+    mask = np.zeros(field.shape, bool)
+    mask[1:5, 1:9, 2:8] = True          # three components, one only a voxel thick
+    mask[7:11, 2:10, 1:9] = True
+    mask[6, 0:3, 9] = True
+    field[~mask] = np.nan
+    eager = descending_complex(field, connectivity=connectivity, mask=mask)
+    for chunks in [(2, 3, 2), (5, 11, 1)]:
+        lazy = descending_complex(da.from_array(field, chunks=chunks),
+                                  connectivity=connectivity, mask=mask)
+        assert_same_hierarchy(lazy, eager)
+        assert np.array_equal(lazy.segment(n_regions=4).compute(), eager.segment(n_regions=4))
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(shape=st.tuples(*(st.integers(1, 7),) * 3), levels=st.integers(1, 6),
+       connectivity=st.sampled_from(["kuhn", 6, 26]), seed=st.integers(0, 2**16),
+       data=st.data())
+def test_any_chunking_gives_the_in_memory_hierarchy(shape, levels, connectivity, seed, data):
+    field = np.random.default_rng(seed).integers(0, levels, size=shape).astype(float)
+    chunks = tuple(data.draw(st.integers(1, s)) for s in shape)
+    eager = descending_complex(field, connectivity=connectivity)
+    lazy = descending_complex(da.from_array(field, chunks=chunks), connectivity=connectivity)
+    assert_same_hierarchy(lazy, eager)
+
+
+def test_most_events_are_decided_below_the_root(monkeypatch):
+    # A noisy 8-bit-like field: its maxima die young, inside their blocks.
+    field = np.round(smooth_random_field((64, 64, 64), np.random.default_rng(5), sigma=0.7)
+                     * 40)
+    decided = []
+    assembled = _group_tree.assembled
+    monkeypatch.setattr(_group_tree, "assembled", lambda parts: decided.extend(parts)
+                        or assembled(parts))
+    lazy = descending_complex(da.from_array(field, chunks=32))
+    groups = _group_tree.block_tree((2, 2, 2))
+    assert len(decided) == len(groups) == 15
+    counts = np.array([len(d[0]) for d in decided])
+    leaves = np.array([g[2] is None for g in groups])
+    assert counts.sum() == len(lazy.young) > 1000
+    assert counts[leaves].sum() > 0.6 * counts.sum()      # most die inside their block
+    assert counts[-1] < 0.15 * counts.sum()               # the root decides few
+    assert_same_hierarchy(lazy, descending_complex(field))
+
+
+def test_block_tree_halves_the_longest_axis():
+    groups = _group_tree.block_tree((4, 1, 2))
+    leaves = [g for g in groups if g[2] is None]
+    assert sorted(g[0] for g in leaves) == [(i, 0, k) for i in range(4) for k in range(2)]
+    root = groups[-1]
+    assert root[:3] == ((0, 0, 0), (4, 1, 2), 0)
+    for lo, hi, axis, low, high in groups:
+        if axis is not None:     # the halves tile the group along `axis`
+            assert groups[low][0] == lo and groups[high][1] == hi
+            assert groups[low][1][axis] == groups[high][0][axis]
+
+
+def test_the_sample_sort_gives_the_in_memory_ids():
+    rng = np.random.default_rng(6)
+    parts = []
+    for size in (0, 5, 300, 1, 57, 0, 900):
+        gids = rng.choice(10**6, size=size, replace=False)
+        parts.append((gids, rng.integers(0, 7, size=size).astype(float)))   # many ties
+    gids = np.concatenate([p[0] for p in parts])
+    values = np.concatenate([p[1] for p in parts])
+    expected = np.empty(len(gids), np.int64)
+    expected[np.lexsort((gids, values))[::-1]] = np.arange(len(gids))
+    for buckets in (1, 3, 32):
+        from volseg._task_graph import TaskGraph
+
+        graph = TaskGraph("test-ranks")
+        keys = [graph(tuple, [p[0], p[1]]) for p in parts]
+        per_block, total, maxima = _ranks.ranks_of(graph, keys, buckets)
+        results = dask.compute(*graph.delayed([*per_block, total, *maxima]))
+        assert results[len(parts)] == len(gids)
+        got = dict(zip(np.concatenate([r[0] for r in results[:len(parts)]]).tolist(),
+                       np.concatenate([r[1] for r in results[:len(parts)]]).tolist(),
+                       strict=True))
+        assert [got[g] for g in gids.tolist()] == expected.tolist()
+        sorted_gids = np.concatenate([m[0] for m in results[len(parts) + 1:]])
+        assert np.array_equal(sorted_gids, gids[np.argsort(expected)])
+
+
+def test_the_client_holds_no_outer_layer(monkeypatch):
+    # What the build's computes bring back to the client: the maxima (in order) and the
+    # decided events (the hierarchy), never the blocks' outer layers or their forests.
+    field = smooth_random_field((40, 40, 40), np.random.default_rng(9), sigma=1.0)
+    received = []
+
+    def compute(*collections, stage):
+        results = dask.compute(*collections)
+        received.extend(results)
+        return results
+
+    from volseg._block_hooks import BlockHooks
+
+    lazy = _blocks.dask_descending_complex(da.from_array(field, chunks=10), "kuhn",
+                                           hooks=BlockHooks(compute=compute))
+    total = sum(_nbytes(r) for r in received)
+    per_maximum = total / len(lazy.maxima)
+    assert per_maximum < 64            # 16 B for the maxima + 48 B for the events
+    assert_same_hierarchy(lazy, descending_complex(field))
+
+
+def _nbytes(item):
+    if isinstance(item, np.ndarray):
+        return item.nbytes
+    if isinstance(item, (tuple, list)):
+        return sum(_nbytes(i) for i in item)
+    return 8

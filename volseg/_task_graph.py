@@ -1,0 +1,48 @@
+"""`TaskGraph`: a Dask graph written task by task, for the reductions over block groups.
+
+`dask.delayed` merges the graphs of a call's arguments at every call, so a graph of
+n calls over one large collection takes O(n x its size) to build (minutes for a few
+thousand calls over a 1024^3 volume's blocks). Here the tasks go into one dict, and
+one `HighLevelGraph` layer joins it to the collections it reads.
+"""
+
+from __future__ import annotations
+
+import itertools
+import operator
+
+__all__ = ["TaskGraph"]
+
+_names = itertools.count()
+
+
+class TaskGraph:
+    """Tasks ``(function, *args)`` in one layer over `dependencies` (Dask collections
+    whose keys, and this graph's own keys, may appear in the arguments, also inside
+    lists; tuples that are not keys are passed as they are)."""
+
+    def __init__(self, label: str, dependencies=()):
+        from dask.base import tokenize
+
+        self.name = f"volseg-{label}-{tokenize(*dependencies, next(_names))}"
+        self.tasks = {}
+        self.dependencies = list(dependencies)
+
+    def __call__(self, function, *args):
+        """The key of a new task ``function(*args)``."""
+        key = (self.name, len(self.tasks))
+        self.tasks[key] = (function, *args)
+        return key
+
+    def item(self, key, index):
+        """The key of ``key's result[index]``."""
+        return self(operator.getitem, key, index)
+
+    def delayed(self, keys) -> list:
+        """Delayed objects of `keys`, in one graph."""
+        from dask.delayed import Delayed
+        from dask.highlevelgraph import HighLevelGraph
+
+        graph = HighLevelGraph.from_collections(self.name, self.tasks,
+                                                dependencies=self.dependencies)
+        return [Delayed(key, graph, layer=self.name) for key in keys]
