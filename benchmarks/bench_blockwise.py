@@ -128,13 +128,14 @@ def print_stages(blockwise: dict) -> None:
     the client) and bytes the client received; then the Morse phases."""
     stages = blockwise.get("cluster_stages") or []
     if stages:
-        print("  | stage | s | workers sent MB | client received MB |")
-        print("  | --- | --- | --- | --- |")
+        print("  | stage | s | workers sent MB | client received MB | client peak so far GB |")
+        print("  | --- | --- | --- | --- | --- |")
         for s in stages:
             sent = s["workers_sent_bytes"]
             sent = "?" if sent is None else f"{sent / 1e6:.1f}"
             print(f"  | {s['stage']} | {s['seconds']:.1f} | {sent} "
-                  f"| {s['client_received_bytes'] / 1e6:.1f} |")
+                  f"| {s['client_received_bytes'] / 1e6:.1f} "
+                  f"| {s.get('client_peak_bytes', 0) / 2**30:.2f} |")
     for phase, seconds in (blockwise.get("morse_phases_s") or {}).items():
         print(f"  Morse phase {phase}: {seconds:.1f} s")
 

@@ -140,7 +140,8 @@ class Engine:
         self.client = None
         self._stack = contextlib.ExitStack()
         #: Per compute on a cluster: the stage, its seconds, the bytes its workers sent
-        #: (to each other and to the client) and the bytes the client received.
+        #: (to each other and to the client), the bytes the client received and the
+        #: client's peak memory so far.
         self.stages: list[dict] = []
 
     @property
@@ -317,7 +318,8 @@ class Engine:
         after = self._sent() if sent >= 0 else -1
         self.stages.append({"stage": stage, "seconds": round(time.perf_counter() - start, 3),
                             "workers_sent_bytes": after - sent if after >= 0 else None,
-                            "client_received_bytes": int(sum(sizeof(r) for r in results))})
+                            "client_received_bytes": int(sum(sizeof(r) for r in results)),
+                            "client_peak_bytes": _peak_rss()})
 
     def _over_limit(self, what: str) -> EngineError:
         """The one line of a cluster stopped at its memory limit: `what` happened, the
@@ -326,6 +328,14 @@ class Engine:
                  if self.scheduler == "local" else f"the cluster at {self.scheduler}")
         return EngineError(f"{what} ({limit}); give more --memory-limit, fewer --workers or "
                            "smaller --chunks")
+
+
+def _peak_rss() -> int:
+    """This process's peak resident memory so far, in bytes (Linux counts KiB)."""
+    import resource
+
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return int(peak * (1 if sys.platform == "darwin" else 1024))
 
 
 def _bytes_sent(dask_worker) -> int:

@@ -78,7 +78,7 @@ def _block_sums(hierarchy, saddles, unit) -> list:
     """Per block of lazy cells: (cell ids present, their int64 sums)."""
     import dask
 
-    def sums_of(cells, field):
+    def sums_of(cells, field, saddles):
         cells = cells.ravel()
         ids, where = np.unique(cells, return_inverse=True)
         out = np.zeros(len(ids), dtype=np.int64)
@@ -87,7 +87,10 @@ def _block_sums(hierarchy, saddles, unit) -> list:
         return ids[keep], out[keep]
 
     field = hierarchy._field.rechunk(hierarchy.cells.chunks)
-    parts = [dask.delayed(sums_of)(c, f) for c, f in zip(
+    # The saddles (8 B per maximum) as one shared task, sent once to each worker that
+    # needs them, not inside every block's task (a closure, pickled with each).
+    saddles = None if saddles is None else dask.delayed(saddles, pure=True)
+    parts = [dask.delayed(sums_of)(c, f, saddles) for c, f in zip(
         hierarchy.cells.to_delayed().ravel(), field.to_delayed().ravel(), strict=True)]
     return dask.compute(*parts)
 
