@@ -66,21 +66,29 @@ def test_any_chunking_gives_the_in_memory_hierarchy(shape, levels, connectivity,
 
 
 def test_most_events_are_decided_below_the_root(monkeypatch):
-    # A noisy 8-bit-like field: its maxima die young, inside their blocks.
+    # A noisy 8-bit-like field: its maxima die young, inside their blocks, and what
+    # goes up is only what touches the faces.
     field = np.round(smooth_random_field((64, 64, 64), np.random.default_rng(5), sigma=0.7)
                      * 40)
-    decided = []
-    assembled = _group_tree.assembled
-    monkeypatch.setattr(_group_tree, "assembled", lambda parts: decided.extend(parts)
-                        or assembled(parts))
+    swept = {}
+    decide = _group_tree.decide
+
+    def recorded(items, faces, group_id):
+        decided, group = decide(items, faces, group_id)
+        swept[group_id] = (len(items.a), len(decided[0]), len(group.items.a))
+        return decided, group
+
+    monkeypatch.setattr(_group_tree, "decide", recorded)
     lazy = descending_complex(da.from_array(field, chunks=32))
     groups = _group_tree.block_tree((2, 2, 2))
-    assert len(decided) == len(groups) == 15
-    counts = np.array([len(d[0]) for d in decided])
+    assert sorted(swept) == list(range(len(groups))) and len(groups) == 15
+    edges, decided, up = (np.array([swept[g][i] for g in range(len(groups))]) for i in range(3))
     leaves = np.array([g[2] is None for g in groups])
-    assert counts.sum() == len(lazy.young) > 1000
-    assert counts[leaves].sum() > 0.6 * counts.sum()      # most die inside their block
-    assert counts[-1] < 0.15 * counts.sum()               # the root decides few
+    assert decided.sum() == len(lazy.young) > 5000
+    assert decided[leaves].sum() > 0.6 * decided.sum()     # most die inside their block
+    assert up[leaves].sum() < 0.4 * edges[leaves].sum()    # what goes up is the faces'
+    assert edges[-1] < 0.15 * edges[leaves].sum()          # the root sees few edges
+    assert up[-1] == 0
     assert_same_hierarchy(lazy, descending_complex(field))
 
 

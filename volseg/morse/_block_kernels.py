@@ -104,52 +104,29 @@ def cells_of_ends(ends, keys, ids, cells):
 
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
-def _joined(parent, eparent, root, other, end, other_end):
-    """Component `other` joins `root` (the higher: roots are their component's highest
-    node); `other_end`'s representatives' set joins `end`'s. Returns that set's root."""
-    parent[other] = root
-    e = find_root(eparent, end)
-    eparent[find_root(eparent, other_end)] = e
-    return e
-
-
 @numba.njit(cache=True, nogil=True)
-def decide(x, y, node_cell, node_open, ev_item, ev_young, ev_elder, ev_x_elder, res_item,
-           res_elder, up_item, up_kind, up_x, up_y):
+def decide(x, y, node_cell, node_open, ev_item, ev_young, ev_x_elder, up_item, up_x, up_y):
     """One block group's share of the elder-rule union-find (`_group_tree`).
 
-    Items 0..n-1 sorted by increasing key, swept from the last (the highest saddle)
-    down; item k joins local nodes x[k] and y[k] (an edge), or asks for the elder of
-    an event decided below (a query: y[k] < 0, at node x[k]). node_cell[i] is node i's
-    cell (a maximum id: lower is higher), node_open[i] whether the cell may have
-    edges outside the group. A component is closed when none of its nodes is open:
-    then it is the whole graph's component at that level too. An edge that joins two
-    closed components, or a closed one to a higher open one, is an event of the whole
-    graph (the second with its elder asked above); anything else goes up (`up_kind` 0,
-    an edge; 1, a query passed on; 2, a query for the elder of the event of item k),
-    its nodes replaced by their representatives (`erep`): the highest node of a closed
-    component, or the open node whose component absorbed it. Returns the counts of
-    events, answered queries and items up.
+    Edges 0..n-1 between local nodes x[k] and y[k], sorted by increasing key, swept
+    from the last (the highest saddle) down. node_cell[i] is node i's cell (a maximum
+    id: lower is higher), node_open[i] whether the cell may have edges outside the
+    group. A component is closed when none of its nodes is open: then it is the whole
+    graph's component at that level too. An edge whose lower side is closed is an
+    event of the whole graph: that side's highest maximum dies (its elder, the other
+    side's highest, is found later from the events: `_kernels.elders`). Any other edge
+    goes up, its nodes replaced by their representatives (`erep`): the highest node of
+    a closed component, or the open node whose component absorbed it. Returns the
+    counts of events and of edges up.
     """
     n = len(node_cell)
     parent = np.arange(n)
     is_open = node_open.copy()
     eparent = np.arange(n)
     erep = np.arange(n)
-    n_ev = n_res = n_up = 0
+    n_ev = n_up = 0
     for k in range(len(x) - 1, -1, -1):
         rx = find_root(parent, x[k])
-        if y[k] < 0:                       # a query: the elder of an event below
-            if not is_open[rx]:
-                res_item[n_res] = k
-                res_elder[n_res] = node_cell[rx]
-                n_res += 1
-            else:
-                up_item[n_up], up_kind[n_up], up_y[n_up] = k, 1, -1
-                up_x[n_up] = erep[find_root(eparent, x[k])]
-                n_up += 1
-            continue
         ry = find_root(parent, y[k])
         if rx == ry:
             continue
@@ -160,21 +137,18 @@ def decide(x, y, node_cell, node_open, ev_item, ev_young, ev_elder, ev_x_elder, 
             ev_item[n_ev] = k
             ev_x_elder[n_ev] = x_higher
             ev_young[n_ev] = node_cell[low]
-            e = _joined(parent, eparent, high, low, high_end, low_end)
-            if is_open[high]:              # its elder is the open side's highest, above
-                ev_elder[n_ev] = -1
-                up_item[n_up], up_kind[n_up], up_x[n_up], up_y[n_up] = k, 2, erep[e], -1
-                n_up += 1
-            else:                          # two closed components: all known here
-                ev_elder[n_ev] = node_cell[high]
-                erep[e] = high
             n_ev += 1
+            parent[low] = high
+            e = find_root(eparent, high_end)
+            eparent[find_root(eparent, low_end)] = e
+            if not is_open[high]:          # two closed components: one, the higher's
+                erep[e] = high
             continue
         # undecided: the open side's component may be higher, or joined already, outside
-        up_item[n_up], up_kind[n_up] = k, 0
+        up_item[n_up] = k
         up_x[n_up] = erep[find_root(eparent, x[k])]
         up_y[n_up] = erep[find_root(eparent, y[k])]
         n_up += 1
         parent[low] = high
         is_open[high] = True
-    return n_ev, n_res, n_up
+    return n_ev, n_up

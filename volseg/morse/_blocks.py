@@ -267,7 +267,8 @@ def dask_descending_complex(field, connectivity="kuhn", mask=None, hooks=None):
     decided = hooks.compute(*_group_tree_of(forests),
                             stage="Morse: cross-cell edges and union-find per block group")
     phases.done("blocks: cells, cross-cell edges, union-find in block groups")
-    young, elder, target, source, saddle, saddle_values = _group_tree.assembled(list(decided))
+    young, elder, target, source, saddle, saddle_values = _group_tree.assembled(list(decided),
+                                                                               len(maxima.gids))
     del decided
     phases.done("client: events in sweep order")
     return MorseHierarchy(

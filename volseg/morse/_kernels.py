@@ -171,6 +171,17 @@ def kruskal(edge_a, edge_b, edge_v, n_max, ev_young, ev_elder, ev_target, ev_sou
     return n_ev
 
 
+@numba.njit(cache=True, nogil=True)
+def elders(young, target, n_max, elder):
+    """elder[e]: the highest maximum of target[e]'s component when young[e] dies into
+    it, from the events in sweep order (each young is its own component's highest
+    then, so the roots here are always the components' highest maxima)."""
+    parent = np.arange(n_max)
+    for e in range(len(young)):
+        elder[e] = find_root(parent, target[e])
+        parent[young[e]] = elder[e]
+
+
 @numba.njit(cache=True, nogil=True, inline="always")
 def _before(i, j, saddle, edge_a, edge_b):
     """Edge i before edge j among equal saddle values: by (saddle vertex, a, b)."""
