@@ -46,8 +46,8 @@ def main(argv=None) -> int:
 
     import dask
     import dask.array as da
-
     from bench_blockwise import write_inputs
+
     from volseg import descending_complex, grid_curvature
     from volseg.io import read_zarr
     from volseg.morse import _exits, _group_tree

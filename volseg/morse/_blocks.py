@@ -25,9 +25,9 @@
    maxima, events and persistence as in memory, for any chunking (tested).
 
 The returned `MorseHierarchy` holds the per-maximum data and the events in memory and
-its `cells` as a lazy Dask array; `segment` relabels block by block. The client's own
-share is that result (about 48 B per maximum): nothing else per maximum or per voxel
-comes to it.
+its `cells` as a lazy Dask array; `segment` relabels block by block. What the client
+receives is that result, the maxima in order and the decided events (65 B per maximum
+measured at 512^3): nothing else per maximum, nothing per voxel.
 """
 
 from __future__ import annotations
@@ -264,11 +264,11 @@ def dask_descending_complex(field, connectivity="kuhn", mask=None, hooks=None):
     halo_cells = with_halo(cells, -1, fresh=hooks.store is not None)
     forests = _per_block(hooks.wrap("forests", lambda h, c, block_id: _pairs_of_block(
         h, c, grid.origin(block_id), grid.shape, grid.offsets)), halo, halo_cells)
-    decided = hooks.compute(*_group_tree_of(forests),
-                            stage="Morse: cross-cell edges and union-find per block group")
+    decided = list(hooks.compute(*_group_tree_of(forests),
+                                 stage="Morse: cross-cell edges and union-find per block group"))
     phases.done("blocks: cells, cross-cell edges, union-find in block groups")
-    young, elder, target, source, saddle, saddle_values = _group_tree.assembled(list(decided),
-                                                                               len(maxima.gids))
+    young, elder, target, source, saddle, saddle_values = _group_tree.assembled(
+        decided, len(maxima.gids))
     del decided
     phases.done("client: events in sweep order")
     return MorseHierarchy(

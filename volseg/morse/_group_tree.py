@@ -146,14 +146,23 @@ def block_tree(block_grid) -> list:
 
 
 def assembled(decided: list, n_maxima: int) -> tuple:
-    """The whole graph's events from every group's, in the in-memory sweep order
-    (decreasing saddle, pair), with their elders: (young, elder, target, source,
-    saddle, saddle value)."""
-    young, target, source, saddle, value = (np.concatenate([d[k] for d in decided])
-                                            for k in range(5))
+    """The whole graph's events from every group's (`decided`, emptied as they are
+    joined), in the in-memory sweep order (decreasing saddle, pair), with their
+    elders: (young, elder, target, source, saddle, saddle value)."""
+    # One column at a time, each group's copy dropped as it is joined: the peak is a
+    # column more than the events, not twice them (the client's share, issue 30).
+    columns = []
+    for k in range(5):
+        columns.append(np.concatenate([d[k] for d in decided]))
+        for i, d in enumerate(decided):
+            decided[i] = (*d[:k], None, *d[k + 1:])
+    young, target, source, saddle, value = columns
+    del columns
     order = _saddle_order(value, saddle, np.minimum(target, source), np.maximum(target, source))
     order = order[::-1]
     young, target, source = (v[order].astype(np.int32) for v in (young, target, source))
+    saddle, value = saddle[order].astype(np.int64), value[order]
+    del order
     elder = np.empty_like(young)
     _kernels.elders(young, target, n_maxima, elder)
-    return young, elder, target, source, saddle[order].astype(np.int64), value[order]
+    return young, elder, target, source, saddle, value
