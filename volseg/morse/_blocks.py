@@ -310,7 +310,7 @@ def _ids_and_exits(ascent, grid: _Grid, hooks) -> tuple:
     graph = TaskGraph("morse-ids", [ascent])
     shape = ascent.numblocks
     order = list(np.ndindex(shape))
-    summaries = {i: graph(_summary, (ascent.name, *i)) for i in order}
+    summaries = {i: graph(_only, (ascent.name, *i)) for i in order}
     ranks, total, buckets = _ranks.ranks_of(graph, [graph(_maxima_of, summaries[i])
                                                     for i in order], _buckets(len(order)))
     ranks = dict(zip(order, ranks, strict=True))
@@ -360,7 +360,8 @@ def _one_block(item):
     return out
 
 
-def _summary(block):
+def _only(block):
+    """The one element of a 1x1x1 object block (`_per_block`'s result)."""
     return block.flat[0]
 
 
@@ -411,13 +412,9 @@ def _group_tree_of(forests) -> list:
     groups, decided = [], []
     for group_id, (lo, _, axis, low, high) in enumerate(_group_tree.block_tree(forests.numblocks)):
         if axis is None:
-            node = graph(_leaf, (forests.name, *lo), group_id)
+            node = graph(_group_tree.leaf, graph(_only, (forests.name, *lo)), group_id)
         else:
             node = graph(_group_tree.merged, groups[low], groups[high], axis, group_id)
         groups.append(graph.item(node, 1))
         decided.append(graph.item(node, 0))
     return graph.delayed(decided)
-
-
-def _leaf(block, group_id):
-    return _group_tree.leaf(block.flat[0], group_id)
