@@ -57,6 +57,55 @@ def test_pruning_on_the_merge_events_equals_pruning_on_the_whole_cell_graph(conn
                 assert _same_partition(got, _naive_pruning(h, h.cell_measure(measure), k))
 
 
+def _pruning_by_definition(source, target, n_max, base):
+    """The pruning of `_prune` by its definition, without heaps: the live region of
+    least (measure, -id) merges across its lowest-index event to another region."""
+    region = list(range(n_max))
+    measure = [float(b) for b in base]
+    order, extinction = [], {}
+    while True:
+        leaving = {}                      # region -> its lowest-index leaving event
+        for e, (s, t) in enumerate(zip(source, target, strict=True)):
+            if region[s] != region[t]:
+                for r in (region[s], region[t]):
+                    leaving.setdefault(r, e)
+        if not leaving:
+            return order, extinction
+        r = min(leaving, key=lambda r: (measure[r], -r))
+        e = leaving[r]
+        other = region[target[e]] if region[source[e]] == r else region[source[e]]
+        order.append(e)
+        extinction[e] = measure[r]
+        keep, gone = min(r, other), max(r, other)
+        region = [keep if x == gone else x for x in region]
+        measure[keep] = measure[r] + measure[other]
+
+
+def test_the_compiled_pruning_follows_its_definition_exactly_with_ties():
+    """Order and extinctions bit for bit, on random forests (several components,
+    lone cells) with integer measures that tie often, zeros included."""
+    from volseg.morse._prune import prune
+
+    rng = np.random.default_rng(13)
+    for trial in range(60):
+        n_max = int(rng.integers(1, 40))
+        edges = [(int(rng.integers(0, i)), i) for i in range(1, n_max) if rng.random() < 0.85]
+        rng.shuffle(edges)                         # the sweep order: any order of the forest
+        names = rng.permutation(n_max)
+        source = np.array([names[a if rng.random() < 0.5 else b] for a, b in edges], np.int64)
+        target = np.array([names[a] + names[b] - s for (a, b), s in
+                           zip(edges, source, strict=True)], np.int64)
+        base = rng.integers(0, 4 if trial % 2 else 60, n_max).astype(np.float64)
+        order = np.empty(len(edges), np.int64)
+        extinction = np.empty(len(edges))
+        n_merged = prune(source, target, n_max, base, order, extinction)
+        want_order, want_extinction = _pruning_by_definition(source.tolist(), target.tolist(),
+                                                             n_max, base)
+        assert n_merged == len(edges)
+        assert order.tolist() == want_order
+        assert extinction.tolist() == [want_extinction[e] for e in range(len(edges))]
+
+
 def test_measures_of_cells_follow_their_definitions():
     rng = np.random.default_rng(3)
     field = rng.normal(size=(12, 11, 10))

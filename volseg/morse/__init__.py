@@ -58,6 +58,6 @@ def entry_kernels() -> list:
     """The numba kernels of this package called from Python (compiled on a first run,
     cached after it: `volseg._jit_cache`); the helpers they inline have no cache."""
     from ._kernels import steepest_ascent
-    from ._prune import prune
+    from ._prune import prune_events
 
-    return [steepest_ascent, prune]
+    return [steepest_ascent, prune_events]

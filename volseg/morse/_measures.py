@@ -56,22 +56,21 @@ def cell_measures(hierarchy, measure: str) -> np.ndarray:
     sums = np.zeros(n_max, dtype=np.int64)
     if type(hierarchy.cells).__module__.startswith("dask."):
         for ids, part in _block_sums(hierarchy, saddles, unit):
-            _prune.cell_sums(ids, part, sums)
+            sums[ids] += part                                   # a block's ids are distinct
     else:
         cells = hierarchy.cells.ravel()
-        _prune.cell_sums(cells, _terms(cells, hierarchy._field.ravel(), saddles, unit), sums)
+        _add_terms(cells, cells, hierarchy._field.ravel(), saddles, unit, sums)
     scale = (1.0 if weight is None else float(weight)) * (1.0 if unit is None else unit)
     return sums.astype(np.float64) * scale
 
 
-def _terms(cells, field, saddles, unit):
-    """int64 term of each vertex: 1 (size), or f - s above the saddle in steps of
-    `unit` (hypervolume); any value outside the mask (cells < 0)."""
+def _add_terms(cells, slots, field, saddles, unit, out):
+    """out[slots[i]] += the int64 term of vertex i: 1 (size), or f - s above its cell's
+    saddle in steps of `unit` (hypervolume); nothing outside the mask (cells < 0)."""
     if saddles is None:
-        return np.ones(len(cells), dtype=np.int64)
-    s = saddles[np.maximum(cells, 0)]
-    above = np.where(cells >= 0, np.maximum(field - s, 0.0), 0.0)
-    return np.floor(above / unit).astype(np.int64)
+        _prune.cell_sizes(cells, slots, out)
+    else:
+        _prune.cell_hypervolumes(cells, slots, field, saddles, unit, out)
 
 
 def _block_sums(hierarchy, saddles, unit) -> list:
@@ -82,31 +81,37 @@ def _block_sums(hierarchy, saddles, unit) -> list:
         cells = cells.ravel()
         ids, where = np.unique(cells, return_inverse=True)
         out = np.zeros(len(ids), dtype=np.int64)
-        _prune.cell_sums(where.ravel(), _terms(cells, field.ravel(), saddles, unit), out)
+        _add_terms(cells, where.ravel(), field.ravel(), saddles, unit, out)
         keep = ids >= 0
         return ids[keep], out[keep]
 
-    field = hierarchy._field.rechunk(hierarchy.cells.chunks)
     # The saddles (8 B per maximum) as one shared task, sent once to each worker that
     # needs them, not inside every block's task (a closure, pickled with each).
-    saddles = None if saddles is None else dask.delayed(saddles, pure=True)
-    parts = [dask.delayed(sums_of)(c, f, saddles) for c, f in zip(
-        hierarchy.cells.to_delayed().ravel(), field.to_delayed().ravel(), strict=True)]
-    return dask.compute(*parts)
+    return _per_block(sums_of, hierarchy,
+                      None if saddles is None else dask.delayed(saddles, pure=True))
 
 
 def _field_range(hierarchy) -> tuple:
-    """(min, max) of the field over the vertices that took part."""
-    cells, field = hierarchy.cells, hierarchy._field
-    if type(cells).__module__.startswith("dask."):
-        import dask
-        import dask.array as da
+    """(min, max) of the field over the vertices that took part (one pass; per block
+    for lazy cells)."""
+    if type(hierarchy.cells).__module__.startswith("dask."):
+        def range_of(cells, field):
+            return _prune.masked_range(cells.ravel(), field.ravel())
 
-        inside = da.where(cells >= 0, field.rechunk(cells.chunks), np.nan)
-        low, high = dask.compute(da.nanmin(inside), da.nanmax(inside))
-        return float(low), float(high)
-    inside = field[cells >= 0]
-    return float(inside.min()), float(inside.max())
+        parts = _per_block(range_of, hierarchy)
+        return float(min(p[0] for p in parts)), float(max(p[1] for p in parts))
+    low, high = _prune.masked_range(hierarchy.cells.ravel(), hierarchy._field.ravel())
+    return float(low), float(high)
+
+
+def _per_block(function, hierarchy, *shared) -> tuple:
+    """function(cells, field, *shared) of each block of the lazy cells, computed."""
+    import dask
+
+    cells = hierarchy.cells
+    field = hierarchy._field.rechunk(cells.chunks)
+    return dask.compute(*[dask.delayed(function)(c, f, *shared) for c, f in zip(
+        cells.to_delayed().ravel(), field.to_delayed().ravel(), strict=True)])
 
 
 def _cell_saddles(hierarchy, n_max, low) -> np.ndarray:

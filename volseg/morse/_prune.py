@@ -1,4 +1,5 @@
-"""Compiled pruning of the hierarchy by an additive measure (DESIGN.md section 12).
+"""Compiled pruning of the hierarchy by an additive measure (DESIGN.md section 12),
+and the one-pass sums of the cells' measures it prunes by.
 
 Carr, Snoeyink and van de Panne (2004): repeatedly take the region of least measure,
 merge it across the highest saddle it shares with a neighbour, add its measure to the
@@ -7,15 +8,15 @@ cell graph's maximum spanning forest (the cut property; the sweep order is stric
 and those edges are exactly the merge events' (source, target) pairs: the pruning runs
 on the events alone. Each region keeps its events in a pairing heap keyed by sweep
 order (a lower event index is a higher saddle); an event whose two ends already share
-a region is dropped when it reaches the top.
+a region is dropped when it reaches the top. The regions wait in one binary heap
+indexed by region, keyed by measure: a merge raises the keeper's key in place and
+takes the other region out, so the heap never holds a stale entry.
 
 The measures are non-negative, so the pruned measures never decrease: pruned to the
 end once, the order and the measure at each merge (its *extinction*) hold every cut,
 a count k as a prefix of the order, a threshold t as the events whose extinction is
 below t.
 """
-
-import heapq
 
 import numba
 import numpy as np
@@ -60,60 +61,149 @@ def _pop(root, child, sibling, stack):
     return out
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _before(a, b, measure):
+    """Region a is pruned before b: a smaller measure, on a tie the larger id."""
+    return measure[a] < measure[b] or (measure[a] == measure[b] and a > b)
+
+
 @numba.njit(cache=True, nogil=True)
+def _sift_up(i, regions, pos, measure):
+    r = regions[i]
+    while i > 0:
+        up = (i - 1) // 2
+        if not _before(r, regions[up], measure):
+            break
+        regions[i] = regions[up]
+        pos[regions[i]] = i
+        i = up
+    regions[i] = r
+    pos[r] = i
+
+
+@numba.njit(cache=True, nogil=True)
+def _sift_down(i, regions, n, pos, measure):
+    r = regions[i]
+    while True:
+        c = 2 * i + 1
+        if c >= n:
+            break
+        if c + 1 < n and _before(regions[c + 1], regions[c], measure):
+            c += 1
+        if not _before(regions[c], r, measure):
+            break
+        regions[i] = regions[c]
+        pos[regions[i]] = i
+        i = c
+    regions[i] = r
+    pos[r] = i
+
+
+@numba.njit(cache=True, nogil=True)
+def _remove(r, regions, n, pos, measure):
+    """Take region r out of the binary heap `regions[:n]`; returns the new size."""
+    i = pos[r]
+    n -= 1
+    pos[r] = -1
+    if i < n:
+        moved = regions[n]
+        regions[i] = moved
+        pos[moved] = i
+        _sift_down(i, regions, n, pos, measure)
+        _sift_up(pos[moved], regions, pos, measure)
+    return n
+
+
 def prune(source, target, n_max, base, order, extinction):
     """Prune to the end: order[i] is the i-th event merged, extinction[e] the measure
     of the region pruned across event e. `base` (n_max,) is each cell's measure.
 
     Ties of measure: the region whose highest maximum is lower (larger id) first,
     the rest of the Morse stage's order. Returns the number of merges (every event).
+    The pairing heaps' links are int32 when they fit: 24 bytes per event, not 48.
     """
     n_ev = len(source)
-    child = np.full(2 * n_ev, -1, dtype=np.int64)
-    sibling = np.full(2 * n_ev, -1, dtype=np.int64)
-    stack = np.empty(2 * n_ev + 1, dtype=np.int64)
+    link = np.int32 if 2 * n_ev + 1 < 2 ** 31 else np.int64
+    return prune_events(source, target, n_max, base, order, extinction,
+                        np.full(2 * n_ev, -1, dtype=link), np.full(2 * n_ev, -1, dtype=link),
+                        np.empty(2 * n_ev + 1, dtype=link))
+
+
+@numba.njit(cache=True, nogil=True)
+def prune_events(source, target, n_max, base, order, extinction, child, sibling, stack):
+    """`prune` with the pairing heaps' link arrays given: child and sibling (2E,) all
+    -1, stack (2E + 1,)."""
+    n_ev = len(source)
     heap_of = np.full(n_max, -1, dtype=np.int64)
     for e in range(n_ev):             # entry 2e at the source's end, 2e + 1 the target's
         heap_of[source[e]] = _meld(heap_of[source[e]], 2 * e, child, sibling)
         heap_of[target[e]] = _meld(heap_of[target[e]], 2 * e + 1, child, sibling)
     parent = np.arange(n_max)
     measure = base.copy()
-    version = np.zeros(n_max, dtype=np.int64)
-    queue = [(measure[m], -m, np.int64(0)) for m in range(n_max) if heap_of[m] >= 0]
-    heapq.heapify(queue)
+    regions = np.empty(n_max, dtype=np.int64)
+    pos = np.full(n_max, -1, dtype=np.int64)
+    n = 0
+    for m in range(n_max):
+        if heap_of[m] >= 0:
+            regions[n] = m
+            pos[m] = n
+            n += 1
+    for i in range((n - 2) // 2, -1, -1):
+        _sift_down(i, regions, n, pos, measure)
     n_merged = 0
-    while len(queue):
-        value, neg, seen = heapq.heappop(queue)
-        r = -neg
-        if parent[r] != r or version[r] != seen:
-            continue                                    # merged since, or grown since
+    while n:
+        r = regions[0]
         h = heap_of[r]
         while h >= 0 and find_root(parent, source[h // 2]) == find_root(parent, target[h // 2]):
             h = _pop(h, child, sibling, stack)          # an edge inside the region
         heap_of[r] = h
-        if h < 0:
-            continue                                    # a whole component: nothing left
+        if h < 0:                                       # a whole component: nothing left
+            n = _remove(r, regions, n, pos, measure)
+            continue
         e = h // 2
         other = find_root(parent, source[e])
         if other == r:
             other = find_root(parent, target[e])
+        value = measure[r]
         order[n_merged] = e
         extinction[e] = value
         n_merged += 1
         keep, gone = min(r, other), max(r, other)
         parent[gone] = keep
-        measure[keep] = value + measure[other]
         heap_of[keep] = _meld(heap_of[r], heap_of[other], child, sibling)
-        version[keep] += 1
-        version[gone] += 1
-        heapq.heappush(queue, (measure[keep], -keep, version[keep]))
+        n = _remove(gone, regions, n, pos, measure)
+        measure[keep] = value + measure[other]          # never smaller: sift down
+        _sift_down(pos[keep], regions, n, pos, measure)
     return n_merged
 
 
 @numba.njit(cache=True, nogil=True)
-def cell_sums(cells, terms, out):
-    """out[c] += the int64 terms of cell c's vertices (cells < 0: outside the mask)."""
+def cell_sizes(cells, slots, out):
+    """out[slots[i]] += 1 for each vertex i inside the mask (cells[i] >= 0)."""
+    for i in range(len(cells)):
+        if cells[i] >= 0:
+            out[slots[i]] += 1
+
+
+@numba.njit(cache=True, nogil=True)
+def cell_hypervolumes(cells, slots, field, saddles, unit, out):
+    """out[slots[i]] += floor((f_i - s) / unit) for each vertex i inside the mask above
+    s = saddles[cells[i]], its cell's highest saddle: the int64 hypervolume terms in
+    one pass (no per-vertex temporaries)."""
     for i in range(len(cells)):
         c = cells[i]
         if c >= 0:
-            out[c] += terms[i]
+            above = field[i] - saddles[c]
+            if above > 0:
+                out[slots[i]] += np.int64(np.floor(above / unit))
+
+
+@numba.njit(cache=True, nogil=True)
+def masked_range(cells, field):
+    """(min, max) of the field over the vertices inside the mask; (inf, -inf) if none."""
+    low, high = np.inf, -np.inf
+    for i in range(len(cells)):
+        if cells[i] >= 0:
+            low = min(low, field[i])
+            high = max(high, field[i])
+    return low, high
