@@ -106,6 +106,33 @@ def test_the_compiled_pruning_follows_its_definition_exactly_with_ties():
         assert extinction.tolist() == [want_extinction[e] for e in range(len(edges))]
 
 
+def test_a_blocks_hash_table_sums_equal_a_plain_sum():
+    """`block_sums` (the blockwise path's per-block sums, no sort) against a sum by
+    cell: runs of one cell, cells outside the mask, thousands of distinct cells (the
+    table grows from 1024 slots), and sizes of int64 ids past 2^31."""
+    from volseg.morse._prune import block_sums
+
+    rng = np.random.default_rng(17)
+    unit = 2.0**-20
+    for distinct, high in ((3, 10), (5000, 10**6), (20000, 10**6), (4000, 2**40)):
+        names = rng.choice(high, distinct, replace=False)
+        cells = np.repeat(names[rng.integers(0, distinct, 30000)], rng.integers(1, 6, 30000))
+        cells[rng.random(len(cells)) < 0.1] = -1
+        field = rng.random(len(cells))
+        big = high > 2**31
+        saddles = np.zeros(0) if big else rng.random(high)
+        for hypervolume in (False,) if big else (False, True):
+            ids, sums = block_sums(cells, field, saddles, unit, hypervolume)
+            expected = {}
+            for i in np.flatnonzero(cells >= 0).tolist():
+                c = int(cells[i])
+                term = 1 if not hypervolume else int(np.floor(max(field[i] - saddles[c], 0)
+                                                              / unit))
+                expected[c] = expected.get(c, 0) + term
+            assert len(ids) == len(set(ids.tolist()))
+            assert dict(zip(ids.tolist(), sums.tolist(), strict=True)) == expected
+
+
 def test_measures_of_cells_follow_their_definitions():
     rng = np.random.default_rng(3)
     field = rng.normal(size=(12, 11, 10))

@@ -40,8 +40,9 @@ def cell_measures(hierarchy, measure: str) -> np.ndarray:
     n_max = len(hierarchy.maxima)
     weight = hierarchy.vertex_weight
     per_vertex = weight is not None and np.ndim(weight) > 0
-    saddles = unit = None
-    if measure == "hypervolume":
+    hypervolume = measure == "hypervolume"
+    saddles, unit = np.zeros(0), 1.0          # a size: every term is 1, no saddle read
+    if hypervolume:
         low, high = _field_range(hierarchy)
         unit = (high - low) / STEPS if high > low else 1.0
         saddles = _cell_saddles(hierarchy, n_max, low)
@@ -49,46 +50,30 @@ def cell_measures(hierarchy, measure: str) -> np.ndarray:
         cells = hierarchy.cells.ravel()
         inside = cells >= 0
         terms = np.asarray(weight, dtype=np.float64)[inside]
-        if measure == "hypervolume":
+        if hypervolume:
             f = hierarchy._field.ravel()[inside]
             terms = terms * np.maximum(f - saddles[cells[inside]], 0.0)
         return np.bincount(cells[inside], weights=terms, minlength=n_max)
     sums = np.zeros(n_max, dtype=np.int64)
     if type(hierarchy.cells).__module__.startswith("dask."):
-        for ids, part in _block_sums(hierarchy, saddles, unit):
+        # The saddles (8 B per maximum) as one shared task, sent once to each worker
+        # that needs them, not inside every block's task (a closure, pickled with each).
+        import dask
+
+        parts = _per_block(_block_sums, hierarchy, dask.delayed(saddles, pure=True), unit,
+                           hypervolume)
+        for ids, part in parts:
             sums[ids] += part                                   # a block's ids are distinct
     else:
-        cells = hierarchy.cells.ravel()
-        _add_terms(cells, cells, hierarchy._field.ravel(), saddles, unit, sums)
-    scale = (1.0 if weight is None else float(weight)) * (1.0 if unit is None else unit)
+        _prune.cell_sums(hierarchy.cells.ravel(), hierarchy._field.ravel(), saddles, unit,
+                         hypervolume, sums)
+    scale = (1.0 if weight is None else float(weight)) * unit
     return sums.astype(np.float64) * scale
 
 
-def _add_terms(cells, slots, field, saddles, unit, out):
-    """out[slots[i]] += the int64 term of vertex i: 1 (size), or f - s above its cell's
-    saddle in steps of `unit` (hypervolume); nothing outside the mask (cells < 0)."""
-    if saddles is None:
-        _prune.cell_sizes(cells, slots, out)
-    else:
-        _prune.cell_hypervolumes(cells, slots, field, saddles, unit, out)
-
-
-def _block_sums(hierarchy, saddles, unit) -> list:
-    """Per block of lazy cells: (cell ids present, their int64 sums)."""
-    import dask
-
-    def sums_of(cells, field, saddles):
-        cells = cells.ravel()
-        ids, where = np.unique(cells, return_inverse=True)
-        out = np.zeros(len(ids), dtype=np.int64)
-        _add_terms(cells, where.ravel(), field.ravel(), saddles, unit, out)
-        keep = ids >= 0
-        return ids[keep], out[keep]
-
-    # The saddles (8 B per maximum) as one shared task, sent once to each worker that
-    # needs them, not inside every block's task (a closure, pickled with each).
-    return _per_block(sums_of, hierarchy,
-                      None if saddles is None else dask.delayed(saddles, pure=True))
+def _block_sums(cells, field, saddles, unit, hypervolume):
+    """(cell ids present, their int64 sums) of one block of lazy cells."""
+    return _prune.block_sums(cells.ravel(), field.ravel(), saddles, unit, hypervolume)
 
 
 def _field_range(hierarchy) -> tuple:

@@ -177,25 +177,67 @@ def prune_events(source, target, n_max, base, order, extinction, child, sibling,
     return n_merged
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _term(cells, field, saddles, unit, hypervolume, i):
+    """The int64 term of vertex i inside the mask: 1 (size), or floor((f - s) / unit)
+    above s = its cell's highest saddle, else 0 (hypervolume)."""
+    if not hypervolume:
+        return np.int64(1)
+    above = field[i] - saddles[cells[i]]
+    return np.int64(np.floor(above / unit)) if above > 0 else np.int64(0)
+
+
 @numba.njit(cache=True, nogil=True)
-def cell_sizes(cells, slots, out):
-    """out[slots[i]] += 1 for each vertex i inside the mask (cells[i] >= 0)."""
+def cell_sums(cells, field, saddles, unit, hypervolume, out):
+    """out[c] += the terms of cell c's vertices (cells < 0: outside the mask), in one
+    pass: no per-vertex temporaries."""
     for i in range(len(cells)):
         if cells[i] >= 0:
-            out[slots[i]] += 1
+            out[cells[i]] += _term(cells, field, saddles, unit, hypervolume, i)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _slot(keys, key, bits):
+    """The slot of `key` in an open-addressing table of 2^bits int64 keys (-1 empty)."""
+    mask = (1 << bits) - 1
+    h = np.int64((np.uint64(key) * np.uint64(0x9E3779B97F4A7C15)) >> np.uint64(64 - bits))
+    while keys[h] >= 0 and keys[h] != key:
+        h = (h + 1) & mask
+    return h
 
 
 @numba.njit(cache=True, nogil=True)
-def cell_hypervolumes(cells, slots, field, saddles, unit, out):
-    """out[slots[i]] += floor((f_i - s) / unit) for each vertex i inside the mask above
-    s = saddles[cells[i]], its cell's highest saddle: the int64 hypervolume terms in
-    one pass (no per-vertex temporaries)."""
+def block_sums(cells, field, saddles, unit, hypervolume):
+    """(ids, sums) of a block: its distinct cells (any order) and the sums of their
+    terms, through a hash table (no sort of the block; a run of one cell along the
+    fastest axis is one lookup)."""
+    bits = 10
+    keys = np.full(1 << bits, -1, dtype=np.int64)
+    sums = np.zeros(1 << bits, dtype=np.int64)
+    used, last, slot = 0, -1, 0
     for i in range(len(cells)):
         c = cells[i]
-        if c >= 0:
-            above = field[i] - saddles[c]
-            if above > 0:
-                out[slots[i]] += np.int64(np.floor(above / unit))
+        if c < 0:
+            continue
+        if c != last:
+            if 2 * (used + 1) > len(keys):              # grow at half full
+                bits += 1
+                grown = np.full(1 << bits, -1, dtype=np.int64)
+                grown_sums = np.zeros(1 << bits, dtype=np.int64)
+                for k in range(len(keys)):
+                    if keys[k] >= 0:
+                        at = _slot(grown, keys[k], bits)
+                        grown[at] = keys[k]
+                        grown_sums[at] = sums[k]
+                keys, sums = grown, grown_sums
+            slot = _slot(keys, c, bits)
+            if keys[slot] < 0:
+                keys[slot] = c
+                used += 1
+            last = c
+        sums[slot] += _term(cells, field, saddles, unit, hypervolume, i)
+    taken = keys >= 0
+    return keys[taken], sums[taken]
 
 
 @numba.njit(cache=True, nogil=True)
