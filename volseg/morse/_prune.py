@@ -6,11 +6,12 @@ merge it across the highest saddle it shares with a neighbour, add its measure t
 neighbour's. The highest edge leaving a connected union of cells is an edge of the
 cell graph's maximum spanning forest (the cut property; the sweep order is strict),
 and those edges are exactly the merge events' (source, target) pairs: the pruning runs
-on the events alone. Each region keeps its events in a pairing heap keyed by sweep
-order (a lower event index is a higher saddle); an event whose two ends already share
-a region is dropped when it reaches the top. The regions wait in one binary heap
-indexed by region, keyed by measure: a merge raises the keeper's key in place and
-takes the other region out, so the heap never holds a stale entry.
+on the events alone. Each region keeps the events leaving it in a pairing heap keyed
+by sweep order (a lower event index is a higher saddle). Two regions share at most one
+edge of the forest, so a merge across e takes e out of both ends' heaps (a pop at one,
+a delete through parent links at the other) and the heaps never hold an edge inside
+a region. The regions wait in one 4-ary heap of (measure, region), indexed by region:
+a merge raises the keeper's key in place and takes the other region out.
 
 The measures are non-negative, so the pruned measures never decrease: pruned to the
 end once, the order and the measure at each merge (its *extinction*) hold every cut,
@@ -25,92 +26,116 @@ from .._union_find import find_root
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _meld(a, b, child, sibling):
-    """The root of two pairing heaps of event entries (entry // 2 is its key)."""
+def _meld(a, b, child, sibling, prev):
+    """The root of two pairing heaps of event entries (entry // 2 is its key); `prev`
+    is a node's left sibling, or its parent for a first child (-1 for a root)."""
     if a < 0:
         return b
     if b < 0:
         return a
     if b // 2 < a // 2:
         a, b = b, a
-    sibling[b] = child[a]
+    first = child[a]
+    sibling[b] = first
+    if first >= 0:
+        prev[first] = b
+    prev[b] = a
     child[a] = b
     return a
 
 
 @numba.njit(cache=True, nogil=True)
-def _pop(root, child, sibling, stack):
+def _pop(root, child, sibling, prev, stack):
     """The heap without its root: the two-pass pairing of the root's children."""
     c = child[root]
+    child[root] = -1
     n = 0
     while c >= 0:
         second = sibling[c]
-        sibling[c] = -1
+        prev[c] = sibling[c] = -1
         if second < 0:
             stack[n] = c
             c = -1
         else:
             rest = sibling[second]
-            sibling[second] = -1
-            stack[n] = _meld(c, second, child, sibling)
+            prev[second] = sibling[second] = -1
+            stack[n] = _meld(c, second, child, sibling, prev)
             c = rest
         n += 1
     out = -1
     for i in range(n - 1, -1, -1):
-        out = _meld(out, stack[i], child, sibling)
+        out = _meld(out, stack[i], child, sibling, prev)
     return out
 
 
+@numba.njit(cache=True, nogil=True)
+def _delete(x, root, child, sibling, prev, stack):
+    """The heap `root` without its node x: x's subtree cut out, popped, melded back."""
+    if x == root:
+        return _pop(x, child, sibling, prev, stack)
+    before, after = prev[x], sibling[x]
+    if child[before] == x:
+        child[before] = after
+    else:
+        sibling[before] = after
+    if after >= 0:
+        prev[after] = before
+    prev[x] = sibling[x] = -1
+    return _meld(root, _pop(x, child, sibling, prev, stack), child, sibling, prev)
+
+
 @numba.njit(cache=True, nogil=True, inline="always")
-def _before(a, b, measure):
+def _before(key_a, a, key_b, b):
     """Region a is pruned before b: a smaller measure, on a tie the larger id."""
-    return measure[a] < measure[b] or (measure[a] == measure[b] and a > b)
+    return key_a < key_b or (key_a == key_b and a > b)
 
 
 @numba.njit(cache=True, nogil=True)
-def _sift_up(i, regions, pos, measure):
-    r = regions[i]
+def _sift_up(i, key, region, pos):
+    k, r = key[i], region[i]
     while i > 0:
-        up = (i - 1) // 2
-        if not _before(r, regions[up], measure):
+        up = (i - 1) >> 2
+        if not _before(k, r, key[up], region[up]):
             break
-        regions[i] = regions[up]
-        pos[regions[i]] = i
+        key[i], region[i] = key[up], region[up]
+        pos[region[i]] = i
         i = up
-    regions[i] = r
+    key[i], region[i] = k, r
     pos[r] = i
 
 
 @numba.njit(cache=True, nogil=True)
-def _sift_down(i, regions, n, pos, measure):
-    r = regions[i]
+def _sift_down(i, key, region, n, pos):
+    k, r = key[i], region[i]
     while True:
-        c = 2 * i + 1
-        if c >= n:
+        first = 4 * i + 1
+        if first >= n:
             break
-        if c + 1 < n and _before(regions[c + 1], regions[c], measure):
-            c += 1
-        if not _before(regions[c], r, measure):
+        best = first
+        for c in range(first + 1, min(first + 4, n)):
+            if _before(key[c], region[c], key[best], region[best]):
+                best = c
+        if not _before(key[best], region[best], k, r):
             break
-        regions[i] = regions[c]
-        pos[regions[i]] = i
-        i = c
-    regions[i] = r
+        key[i], region[i] = key[best], region[best]
+        pos[region[i]] = i
+        i = best
+    key[i], region[i] = k, r
     pos[r] = i
 
 
 @numba.njit(cache=True, nogil=True)
-def _remove(r, regions, n, pos, measure):
-    """Take region r out of the binary heap `regions[:n]`; returns the new size."""
+def _remove(r, key, region, n, pos):
+    """Take region r out of the heap `key[:n]`, `region[:n]`; returns the new size."""
     i = pos[r]
     n -= 1
     pos[r] = -1
     if i < n:
-        moved = regions[n]
-        regions[i] = moved
+        moved = region[n]
+        key[i], region[i] = key[n], moved
         pos[moved] = i
-        _sift_down(i, regions, n, pos, measure)
-        _sift_up(pos[moved], regions, pos, measure)
+        _sift_down(i, key, region, n, pos)
+        _sift_up(pos[moved], key, region, pos)
     return n
 
 
@@ -120,60 +145,60 @@ def prune(source, target, n_max, base, order, extinction):
 
     Ties of measure: the region whose highest maximum is lower (larger id) first,
     the rest of the Morse stage's order. Returns the number of merges (every event).
-    The pairing heaps' links are int32 when they fit: 24 bytes per event, not 48.
+    The pairing heaps' links are int32 when they fit: 32 bytes per event, not 64.
     """
     n_ev = len(source)
     link = np.int32 if 2 * n_ev + 1 < 2 ** 31 else np.int64
-    return prune_events(source, target, n_max, base, order, extinction,
-                        np.full(2 * n_ev, -1, dtype=link), np.full(2 * n_ev, -1, dtype=link),
+    child, sibling, prev = (np.full(2 * n_ev, -1, dtype=link) for _ in range(3))
+    return prune_events(source, target, n_max, base, order, extinction, child, sibling, prev,
                         np.empty(2 * n_ev + 1, dtype=link))
 
 
 @numba.njit(cache=True, nogil=True)
-def prune_events(source, target, n_max, base, order, extinction, child, sibling, stack):
-    """`prune` with the pairing heaps' link arrays given: child and sibling (2E,) all
-    -1, stack (2E + 1,)."""
+def prune_events(source, target, n_max, base, order, extinction, child, sibling, prev, stack):
+    """`prune` with the pairing heaps' link arrays given: child, sibling and prev
+    (2E,) all -1, stack (2E + 1,)."""
     n_ev = len(source)
     heap_of = np.full(n_max, -1, dtype=np.int64)
     for e in range(n_ev):             # entry 2e at the source's end, 2e + 1 the target's
-        heap_of[source[e]] = _meld(heap_of[source[e]], 2 * e, child, sibling)
-        heap_of[target[e]] = _meld(heap_of[target[e]], 2 * e + 1, child, sibling)
+        heap_of[source[e]] = _meld(heap_of[source[e]], 2 * e, child, sibling, prev)
+        heap_of[target[e]] = _meld(heap_of[target[e]], 2 * e + 1, child, sibling, prev)
     parent = np.arange(n_max)
     measure = base.copy()
-    regions = np.empty(n_max, dtype=np.int64)
+    key = np.empty(n_max, dtype=measure.dtype)
+    region = np.empty(n_max, dtype=np.int64)
     pos = np.full(n_max, -1, dtype=np.int64)
     n = 0
-    for m in range(n_max):
+    for m in range(n_max):            # a cell without events is alone: it never merges
         if heap_of[m] >= 0:
-            regions[n] = m
-            pos[m] = n
+            key[n], region[n], pos[m] = measure[m], m, n
             n += 1
-    for i in range((n - 2) // 2, -1, -1):
-        _sift_down(i, regions, n, pos, measure)
+    for i in range((n - 2) // 4, -1, -1):
+        _sift_down(i, key, region, n, pos)
     n_merged = 0
     while n:
-        r = regions[0]
-        h = heap_of[r]
-        while h >= 0 and find_root(parent, source[h // 2]) == find_root(parent, target[h // 2]):
-            h = _pop(h, child, sibling, stack)          # an edge inside the region
-        heap_of[r] = h
-        if h < 0:                                       # a whole component: nothing left
-            n = _remove(r, regions, n, pos, measure)
-            continue
+        r = region[0]
+        h = heap_of[r]                # the highest edge leaving r
         e = h // 2
-        other = find_root(parent, source[e])
-        if other == r:
-            other = find_root(parent, target[e])
+        other = find_root(parent, target[e] if h % 2 == 0 else source[e])
         value = measure[r]
         order[n_merged] = e
         extinction[e] = value
         n_merged += 1
         keep, gone = min(r, other), max(r, other)
         parent[gone] = keep
-        heap_of[keep] = _meld(heap_of[r], heap_of[other], child, sibling)
-        n = _remove(gone, regions, n, pos, measure)
-        measure[keep] = value + measure[other]          # never smaller: sift down
-        _sift_down(pos[keep], regions, n, pos, measure)
+        # e is inside the union now: out of both ends' heaps (h ^ 1 is e's other entry)
+        heap_of[keep] = _meld(_pop(h, child, sibling, prev, stack),
+                              _delete(h ^ 1, heap_of[other], child, sibling, prev, stack),
+                              child, sibling, prev)
+        heap_of[gone] = -1
+        n = _remove(gone, key, region, n, pos)
+        measure[keep] = value + measure[other]
+        if heap_of[keep] < 0:         # the whole component: nothing leaves it
+            n = _remove(keep, key, region, n, pos)
+        else:                         # a larger key: down the heap
+            key[pos[keep]] = measure[keep]
+            _sift_down(pos[keep], key, region, n, pos)
     return n_merged
 
 
