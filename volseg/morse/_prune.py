@@ -145,43 +145,45 @@ def prune(source, target, n_max, base, order, extinction):
 
     Ties of measure: the region whose highest maximum is lower (larger id) first,
     the rest of the Morse stage's order. Returns the number of merges (every event).
-    The pairing heaps' links are int32 when they fit: 32 bytes per event, not 64.
+    Links and region indices are int32 when they fit: 32 bytes per event for the
+    events' heaps and 24 per maximum for the regions' (against 64 and 48).
     """
     n_ev = len(source)
     link = np.int32 if 2 * n_ev + 1 < 2 ** 31 else np.int64
+    index = np.int32 if n_max < 2 ** 31 else np.int64
     child, sibling, prev = (np.full(2 * n_ev, -1, dtype=link) for _ in range(3))
-    return prune_events(source, target, n_max, base, order, extinction, child, sibling, prev,
-                        np.empty(2 * n_ev + 1, dtype=link))
+    return prune_events(source, target, base, order, extinction, child, sibling, prev,
+                        np.empty(2 * n_ev + 1, dtype=link), np.arange(n_max, dtype=index))
 
 
 @numba.njit(cache=True, nogil=True)
-def prune_events(source, target, n_max, base, order, extinction, child, sibling, prev, stack):
-    """`prune` with the pairing heaps' link arrays given: child, sibling and prev
-    (2E,) all -1, stack (2E + 1,)."""
-    n_ev = len(source)
-    heap_of = np.full(n_max, -1, dtype=np.int64)
+def prune_events(source, target, base, order, extinction, child, sibling, prev, stack,
+                 parent):
+    """`prune` with its work arrays given: child, sibling and prev (2E,) all -1,
+    stack (2E + 1,) (their dtype is the other per-event arrays'), parent the
+    identity (M,) (its dtype the per-region arrays')."""
+    n_ev, n_max = len(source), len(parent)
+    heap_of = np.full(n_max, -1, dtype=child.dtype)
     for e in range(n_ev):             # entry 2e at the source's end, 2e + 1 the target's
         heap_of[source[e]] = _meld(heap_of[source[e]], 2 * e, child, sibling, prev)
         heap_of[target[e]] = _meld(heap_of[target[e]], 2 * e + 1, child, sibling, prev)
-    parent = np.arange(n_max)
-    measure = base.copy()
-    key = np.empty(n_max, dtype=measure.dtype)
-    region = np.empty(n_max, dtype=np.int64)
-    pos = np.full(n_max, -1, dtype=np.int64)
+    # The regions' heap: key[i] the measure of region[i]; pos[r] where r is (-1: out).
+    key = np.empty(n_max, dtype=base.dtype)
+    region = np.empty(n_max, dtype=parent.dtype)
+    pos = np.full(n_max, -1, dtype=parent.dtype)
     n = 0
     for m in range(n_max):            # a cell without events is alone: it never merges
         if heap_of[m] >= 0:
-            key[n], region[n], pos[m] = measure[m], m, n
+            key[n], region[n], pos[m] = base[m], m, n
             n += 1
     for i in range((n - 2) // 4, -1, -1):
         _sift_down(i, key, region, n, pos)
     n_merged = 0
     while n:
-        r = region[0]
+        r, value = region[0], key[0]
         h = heap_of[r]                # the highest edge leaving r
         e = h // 2
         other = find_root(parent, target[e] if h % 2 == 0 else source[e])
-        value = measure[r]
         order[n_merged] = e
         extinction[e] = value
         n_merged += 1
@@ -192,12 +194,12 @@ def prune_events(source, target, n_max, base, order, extinction, child, sibling,
                               _delete(h ^ 1, heap_of[other], child, sibling, prev, stack),
                               child, sibling, prev)
         heap_of[gone] = -1
+        total = value + key[pos[other]]
         n = _remove(gone, key, region, n, pos)
-        measure[keep] = value + measure[other]
         if heap_of[keep] < 0:         # the whole component: nothing leaves it
             n = _remove(keep, key, region, n, pos)
         else:                         # a larger key: down the heap
-            key[pos[keep]] = measure[keep]
+            key[pos[keep]] = total
             _sift_down(pos[keep], key, region, n, pos)
     return n_merged
 
