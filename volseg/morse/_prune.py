@@ -90,6 +90,13 @@ def _before(key_a, a, key_b, b):
     return key_a < key_b or (key_a == key_b and a > b)
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _put(i, k, r, key, region, pos):
+    """Region r with key k at heap slot i."""
+    key[i], region[i] = k, r
+    pos[r] = i
+
+
 @numba.njit(cache=True, nogil=True)
 def _sift_up(i, key, region, pos):
     k, r = key[i], region[i]
@@ -97,31 +104,26 @@ def _sift_up(i, key, region, pos):
         up = (i - 1) >> 2
         if not _before(k, r, key[up], region[up]):
             break
-        key[i], region[i] = key[up], region[up]
-        pos[region[i]] = i
+        _put(i, key[up], region[up], key, region, pos)
         i = up
-    key[i], region[i] = k, r
-    pos[r] = i
+    _put(i, k, r, key, region, pos)
 
 
 @numba.njit(cache=True, nogil=True)
 def _sift_down(i, key, region, n, pos):
     k, r = key[i], region[i]
-    while True:
-        first = 4 * i + 1
-        if first >= n:
-            break
+    first = 4 * i + 1
+    while first < n:
         best = first
         for c in range(first + 1, min(first + 4, n)):
             if _before(key[c], region[c], key[best], region[best]):
                 best = c
         if not _before(key[best], region[best], k, r):
             break
-        key[i], region[i] = key[best], region[best]
-        pos[region[i]] = i
+        _put(i, key[best], region[best], key, region, pos)
         i = best
-    key[i], region[i] = k, r
-    pos[r] = i
+        first = 4 * i + 1
+    _put(i, k, r, key, region, pos)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -132,8 +134,7 @@ def _remove(r, key, region, n, pos):
     pos[r] = -1
     if i < n:
         moved = region[n]
-        key[i], region[i] = key[n], moved
-        pos[moved] = i
+        _put(i, key[n], moved, key, region, pos)
         _sift_down(i, key, region, n, pos)
         _sift_up(pos[moved], key, region, pos)
     return n
