@@ -3,54 +3,40 @@
     python benchmarks/bench_cut.py --base 7eb96cb                 # 256^3 and 512^3
     python benchmarks/bench_cut.py --base 7eb96cb --sizes 512 --blockwise   # 256^3 chunks
 
-The field is the pipeline's: the weighted curvature of gaussian-filtered noise
-quantized to 8 bits (as `bench_kernels.py`), computed once and saved; each revision
+The field is the pipeline's: the weighted curvature (as float32) of `bench_kernels.py`'s
+gaussian-filtered noise quantized to 8 bits, computed once and saved; each revision
 then loads it in a fresh interpreter, builds the hierarchy (not timed; with
 --blockwise, of the field as a Dask array of 256^3 chunks, threads, its cells persisted
 as the pipeline stores them), and times the two parts of the first hypervolume cut:
 the cells' measures (`cell_measures`) and the pruning to the end (`prune`), best of
---repeat, one revision after the other. Memory
-is each part's own: the peak resident size above the one before it, sampled every
-5 ms with psutil (the build's peak, higher, is not the cut's). Both revisions must
-give the same extinctions: the script checks it and fails otherwise.
+--repeat, one revision after the other. Memory is each part's own: the peak resident
+size above the one before it, sampled every 5 ms with psutil (the build's peak,
+higher, is not the cut's). Both revisions must give the same extinctions: the script
+checks it and fails otherwise.
 """
 
 import argparse
-import json
-import subprocess
-import sys
 import tempfile
 from pathlib import Path
 
 from _common import worktree
+from bench_kernels import ROOT, SETUP, run
 
-HERE = Path(__file__).resolve().parent
-ROOT = HERE.parent
-
-INPUT = """
-import numpy as np
-from scipy.ndimage import gaussian_filter
-from volseg.curvature import grid_curvature
-f = gaussian_filter(np.random.default_rng(0).standard_normal(({n},) * 3), 3)
-f = np.round(255 * (f - f.min()) / np.ptp(f)).astype(np.uint8)
-np.save({path!r}, grid_curvature(f, "weighted").astype(np.float32))
+INPUT = SETUP + """
+np.save({path!r}, grid_curvature(field({n}), "weighted").astype(np.float32))
+print(json.dumps(dict()))
 """
 
-CUT = """
-import sys, json, threading, time
-sys.path.insert(0, {tree!r})
-import numpy as np, psutil
-import volseg
-assert volseg.__file__.startswith({tree!r}), volseg.__file__
-from volseg.morse import descending_complex
+CUT = SETUP + """
+import threading
+import psutil
 from volseg.morse import _measures, _prune
 field = np.load({path!r})
 if {blockwise}:
     import dask, dask.array as da
     dask.config.set(scheduler="threads")
     field = da.from_array(field, chunks=256)
-warm = descending_complex(np.random.default_rng(1).random((12, 12, 12)))
-warm.segment(n_regions=3, measure="hypervolume")
+descending_complex(warm).segment(n_regions=3, measure="hypervolume")
 h = descending_complex(field)
 if {blockwise}:   # the cells computed once, as the pipeline stores them
     import dataclasses
@@ -84,15 +70,6 @@ print(json.dumps(dict(out, maxima=len(h.maxima))))
 """
 
 
-def run(code, **fields):
-    out = subprocess.run([sys.executable, "-c", code.format(**fields)], capture_output=True,
-                         text=True, cwd=tempfile.gettempdir())
-    if out.returncode:
-        raise SystemExit(f"{fields.get('tree', 'input')}: failed:\n{out.stderr[-3000:]}")
-    lines = out.stdout.strip().splitlines()
-    return json.loads(lines[-1]) if lines else {}
-
-
 def main():
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--base", required=True, help="git revision of the previous cut")
@@ -103,11 +80,11 @@ def main():
     with worktree(args.base) as base, tempfile.TemporaryDirectory() as tmp:
         for n in args.sizes:
             path = str(Path(tmp) / f"curvature{n}.npy")
-            run(INPUT, n=n, path=path)
+            run(INPUT, ROOT, n=n, path=path)
             got = {}
             for name, tree in (("base", base), ("now", ROOT)):
                 out = str(Path(tmp) / f"extinction_{name}.npy")
-                got[name] = run(CUT, tree=str(tree), path=path, out=out, repeat=args.repeat,
+                got[name] = run(CUT, tree, path=path, out=out, repeat=args.repeat,
                                 blockwise=args.blockwise)
                 got[name]["extinction"] = out
             import numpy as np
