@@ -235,10 +235,22 @@ def _slot(keys, key, bits):
 
 
 @numba.njit(cache=True, nogil=True)
+def _grown(keys, sums, bits):
+    """The table (keys, sums) rehashed into 2^bits slots."""
+    grown = np.full(1 << bits, -1, dtype=np.int64)
+    grown_sums = np.zeros(1 << bits, dtype=np.int64)
+    for k in range(len(keys)):
+        if keys[k] >= 0:
+            at = _slot(grown, keys[k], bits)
+            grown[at], grown_sums[at] = keys[k], sums[k]
+    return grown, grown_sums
+
+
+@numba.njit(cache=True, nogil=True)
 def block_sums(cells, field, saddles, unit, hypervolume):
     """(ids, sums) of a block: its distinct cells (any order) and the sums of their
     terms, through a hash table (no sort of the block; a run of one cell along the
-    fastest axis is one lookup)."""
+    fastest axis is one lookup). The table doubles before it is half full."""
     bits = 10
     keys = np.full(1 << bits, -1, dtype=np.int64)
     sums = np.zeros(1 << bits, dtype=np.int64)
@@ -248,18 +260,12 @@ def block_sums(cells, field, saddles, unit, hypervolume):
         if c < 0:
             continue
         if c != last:
-            if 2 * (used + 1) > len(keys):              # grow at half full
-                bits += 1
-                grown = np.full(1 << bits, -1, dtype=np.int64)
-                grown_sums = np.zeros(1 << bits, dtype=np.int64)
-                for k in range(len(keys)):
-                    if keys[k] >= 0:
-                        at = _slot(grown, keys[k], bits)
-                        grown[at] = keys[k]
-                        grown_sums[at] = sums[k]
-                keys, sums = grown, grown_sums
             slot = _slot(keys, c, bits)
-            if keys[slot] < 0:
+            if keys[slot] < 0:                          # a new cell
+                if 2 * (used + 1) > len(keys):
+                    bits += 1
+                    keys, sums = _grown(keys, sums, bits)
+                    slot = _slot(keys, c, bits)
                 keys[slot] = c
                 used += 1
             last = c
