@@ -345,7 +345,7 @@ def _write_result(paths, volume, result, data, value_range, outputs, *, checksum
     name = volume.name
     frame = volume.frame or Frame.from_spacing(result.spacing)
     say(f"{name}: {result.n_regions} regions{result.mask.phrase()} from "
-        f"{len(result.hierarchy.maxima)} maxima; writing")
+        f"{result.report.n_maxima} maxima; writing")
     info = summary(result, name=name, source=volume.path, checksum=checksum,
                    files=volume.files, frame=frame, noise=noise, seed=seed,
                    requested_regions=requested_regions)
@@ -437,7 +437,7 @@ def series_to_files(series, level, outputs, *, time_scale=1.0, relax=10, operato
     seg = result.segmentation
     say(f"{series.name}: {len(result.surface.vertices)} vertices, "
         f"{len(result.surface.simplices)} tetrahedra; {seg.n_regions} regions from "
-        f"{len(seg.hierarchy.maxima)} maxima; writing")
+        f"{seg.report.n_maxima} maxima; writing")
     info = series_summary(result, slices, name=series.name,
                           source=series.files[0] if series.files else None,
                           checksum=files_sha256(series.files), files=series.files)

@@ -30,6 +30,7 @@ from .curvature import (
     default_value_scale,
     get_operator,
 )
+from .cuts import CutReport, cut_of
 from .masks import MaskChoice, foreground_mask
 from .morse import MorseHierarchy, check_measure_cut, descending_complex
 
@@ -69,7 +70,9 @@ class Segmentation:
     curvature : (X, Y, Z) or (V,) ndarray of float64
         On the whole volume (after `smooth_sigma`), mask or not; per mesh vertex.
     hierarchy : MorseHierarchy
-        Cut it again (``hierarchy.segment(n_regions=...)``) without recomputing.
+        Cut it again (``hierarchy.segment(n_regions=...)``) without recomputing. A
+        blockwise run's stays where it was built (`volseg.morse.HierarchyOnWorkers`) until
+        something of it is read.
     n_regions : int
         Regions (foreground regions, with a mask).
     operator, min_persistence, value_scale, spacing
@@ -88,6 +91,9 @@ class Segmentation:
     cut : dict
         The cut as asked (``measure``, ``threshold``, ``n_regions``, and ``auto``
         when the count was chosen at the largest gap of the measure).
+    report : CutReport
+        What the cut found (`volseg.cuts.CutReport`): each region's highest
+        maximum, the hierarchy's counts, the measure's curve thinned.
     smooth_sigma : float
         A volume's Gaussian pre-smoothing, sigma in voxels (0: none).
     smooth_rule : str
@@ -117,6 +123,7 @@ class Segmentation:
     measure: str = "persistence"
     threshold: float | None = None
     smooth_rule: str = "given"
+    report: CutReport | None = None
 
     @property
     def smooth(self):
@@ -125,25 +132,10 @@ class Segmentation:
                       "smooth_rounds (meshes)", DeprecationWarning, stacklevel=2)
         return self.smooth_rounds if self.vertices is not None else self.smooth_sigma
 
-    def _cut(self) -> dict:
-        return {"n_regions": self.cut.get("n_regions"), "threshold": self.cut.get("threshold"),
-                "measure": self.cut.get("measure", "persistence"),
-                "min_component": self.cut.get("min_component", 0.0)}
-
-    def _region_tops(self) -> NDArray[np.int64]:
-        """(k,) maximum id of each region's highest maximum."""
-        with warnings.catch_warnings():    # the cut's warnings were given when it was made
-            warnings.simplefilter("ignore", UserWarning)
-            region = self.hierarchy.region_of_maximum(**self._cut())
-        # Maximum ids run by decreasing value: the first id seen per region is its top
-        # (-1, a dropped component, sorts first).
-        ids, tops = np.unique(region, return_index=True)
-        return tops[ids >= 0]
-
     def region_maxima(self) -> NDArray[np.int64]:
         """(k,) flat voxel index of each region's highest curvature maximum (region
         label i + 1 at position i)."""
-        return self.hierarchy.maxima[self._region_tops()].astype(np.int64)
+        return self.report.top_maxima.copy()
 
     def region_sizes(self) -> NDArray[np.int64]:
         """(k + 1,) voxels (or vertices) per label, label 0 first (one pass over the
@@ -159,10 +151,9 @@ class Segmentation:
         ``maximum`` (its highest curvature maximum: [x, y, z] voxel, or the vertex
         index with its ``position`` on a mesh) and ``curvature_at_maximum``."""
         sizes = self.region_sizes()
-        tops = self._region_tops()
         table = []
-        for region, (top, value) in enumerate(zip(self.hierarchy.maxima[tops],
-                                                  self.hierarchy.values[tops], strict=True), 1):
+        for region, (top, value) in enumerate(zip(self.report.top_maxima,
+                                                  self.report.top_values, strict=True), 1):
             where = tuple(int(c) for c in np.unravel_index(int(top), self.labels.shape))
             entry = {"label": region, "size": int(sizes[region]), "maximum": list(where),
                      "curvature_at_maximum": float(value)}
@@ -177,19 +168,18 @@ class Segmentation:
         ``volume`` (in world units), its highest maximum (``maximum``: [x, y, z] voxel, or
         the vertex index), ``curvature_at_maximum``, and that maximum's ``persistence``
         (inf for the highest maximum of a connected component)."""
-        tops = self._region_tops()
-        if not 1 <= int(label) <= len(tops):
-            raise ValueError(f"`label` must be a region 1..{len(tops)}, got {label}")
-        top = int(tops[int(label) - 1])
+        if not 1 <= int(label) <= self.n_regions:
+            raise ValueError(f"`label` must be a region 1..{self.n_regions}, got {label}")
+        top = int(label) - 1
         size = (self.labels == int(label)).sum()
         size = int(size.compute() if _validate.is_lazy(size) else size)
-        flat = int(self.hierarchy.maxima[top])
+        flat = int(self.report.top_maxima[top])
         maximum = (flat if self.vertices is not None
                    else [int(c) for c in np.unravel_index(flat, self.labels.shape)])
         unit = float(np.prod(self.spacing)) if self.spacing is not None else 1.0
         return {"label": int(label), "size": size, "volume": size * unit, "maximum": maximum,
-                "curvature_at_maximum": float(self.hierarchy.values[top]),
-                "persistence": float(self.hierarchy.persistence[top])}
+                "curvature_at_maximum": float(self.report.top_values[top]),
+                "persistence": float(self.report.top_persistence[top])}
 
     def recut(self, n_regions: int | str | None = None, *, min_persistence: float | None = None,
               measure: str | None = None, threshold: float | None = None,
@@ -209,9 +199,8 @@ class Segmentation:
                                  min_component=self.cut.get("min_component", 0.0))
         timings = dict(self.timings)
         with _timed(timings, "recut"):
-            labels, k, record = _cut_of(self.hierarchy, cut, out=out)
-        return dataclasses.replace(self, labels=labels, n_regions=k, cut=record,
-                                   timings=timings, **_cut_fields(record))
+            labels, report = cut_of(self.hierarchy, cut, out=out)
+        return dataclasses.replace(self, labels=labels, timings=timings, **_cut_fields(report))
 
 
 @dataclass(frozen=True)
@@ -250,14 +239,24 @@ class CutRequest:
         """The threshold of a persistence cut (None for another measure)."""
         return self.threshold if self.measure == "persistence" else None
 
-    def of(self, hierarchy: MorseHierarchy) -> dict:
+    def of(self, hierarchy: MorseHierarchy, masked: bool | None = None) -> dict:
         """The keyword arguments of ``hierarchy.segment`` / ``region_of_maximum`` for
-        this cut, the ``auto`` count chosen on `hierarchy`."""
-        min_component = self.min_component if hierarchy.mask is not None else 0.0
+        this cut, the ``auto`` count chosen on `hierarchy` (`masked`: its vertices
+        were masked, default whether it has a mask)."""
+        masked = hierarchy.mask is not None if masked is None else masked
+        min_component = self.min_component if masked else 0.0
         n_regions = (hierarchy.largest_gap(AUTO_REGION_RANGE, self.measure, min_component)
                      if self.auto else self.n_regions)
         return {"n_regions": n_regions, "measure": self.measure, "threshold": self.threshold,
                 "min_component": min_component}
+
+    def measures(self, masked: bool) -> tuple:
+        """The cells' measures the cut reads: its own, and the sizes that
+        `min_component` weighs the components by."""
+        needed = {self.measure} - {"persistence"}
+        if masked and self.min_component > 0:
+            needed.add("size")
+        return tuple(sorted(needed))
 
 
 @dataclass(frozen=True)
@@ -407,53 +406,41 @@ def run_stages(data, request: SegmentRequest, storage: Storage | None = None, *,
         curvature = storage.curvature(checked_grid_curvature(
             values, request.operator, request.spacing, scale, request.padding,
             block_hooks=hooks))
-    hierarchy, labels, k, cut = _morse_and_cut(
+    hierarchy, labels, report = _morse_and_cut(
         curvature, request.cut, timings, mask=choice.mask, storage=storage,
         vertex_weight=float(np.prod(request.spacing)))
-    result = Segmentation(labels, curvature, hierarchy, k, request.operator.name,
-                          value_scale=scale, spacing=request.spacing, timings=timings, cut=cut,
+    result = Segmentation(labels, curvature, hierarchy, operator=request.operator.name,
+                          value_scale=scale, spacing=request.spacing, timings=timings,
                           mask=choice, smooth_sigma=request.smooth_sigma,
                           smooth_rule=request.smooth_rule, padding=request.padding,
-                          **_cut_fields(cut))
+                          **_cut_fields(report))
     return result, value_range
 
 
 def _morse_and_cut(field, cut: CutRequest, timings, *, mask=None, adjacency=None,
                    vertex_weight=None, storage: Storage) -> tuple:
-    """The Morse stage and the cut: (hierarchy, labels 1..k, k, cut record), sizes
-    counted in `vertex_weight` per vertex (`MorseHierarchy.with_vertex_weight`)."""
+    """The Morse stage and the cut: (hierarchy, labels 1..k, `CutReport`), sizes
+    counted in `vertex_weight` per vertex (`MorseHierarchy.with_vertex_weight`). A
+    blockwise hierarchy stays where it was built and is cut there
+    (`volseg.morse.HierarchyOnWorkers`)."""
     with _timed(timings, "morse", storage):
         hierarchy = descending_complex(field, adjacency=adjacency, mask=mask,
-                                       block_hooks=storage.block_hooks)
+                                       block_hooks=storage.block_hooks, on_workers=True)
         if vertex_weight is not None:
             hierarchy = hierarchy.with_vertex_weight(vertex_weight)
     with _timed(timings, "cut", storage):
-        labels, k, record = _cut_of(hierarchy, cut)
+        labels, report = cut_of(hierarchy, cut)
     with _timed(timings, "labels", storage):
-        labels = storage.labels(labels, k)
-    return hierarchy, labels, k, record
+        labels = storage.labels(labels, report.n_regions)
+    return hierarchy, labels, report
 
 
-def _cut_of(hierarchy: MorseHierarchy, cut: CutRequest, out=None) -> tuple:
-    """(labels 1..k, k, cut record) of one cut of `hierarchy`: lazy labels for a
-    blockwise hierarchy, relabelled block by block; into `out` when given."""
-    asked = cut.of(hierarchy)
-    region = hierarchy.region_of_maximum(**asked)
-    labels = hierarchy.relabel(region, out=out)     # regions 1..k, 0 outside a mask
-    k = int(region.max()) + 1
-    threshold = (float(cut.threshold) if cut.threshold is not None
-                 else hierarchy.threshold_for(k, cut.measure, asked["min_component"]))
-    record = {"measure": cut.measure, "threshold": cut.threshold,
-              "min_persistence": cut.min_persistence, "n_regions": asked["n_regions"],
-              "auto": cut.auto, "cut_threshold": threshold,
-              "min_component": asked["min_component"]}
-    return labels, k, record
-
-
-def _cut_fields(record) -> dict:
-    """The `Segmentation` fields of a cut record of `_morse_and_cut`."""
+def _cut_fields(report: CutReport) -> dict:
+    """The `Segmentation` fields of a cut (`cut_of`)."""
+    record = report.record
     threshold = record["cut_threshold"]
-    return {"min_persistence": threshold if record["measure"] == "persistence" else None,
+    return {"n_regions": report.n_regions, "cut": record, "report": report,
+            "min_persistence": threshold if record["measure"] == "persistence" else None,
             "measure": record["measure"], "threshold": threshold}
 
 
@@ -677,13 +664,13 @@ def segment_mesh(
             curvature = _mesh.ring_average(curvature, simplices, rounds)
     known = np.isfinite(curvature)   # boundary vertices with 'nan', vertices in no simplex
     mask = None if known.all() else known
-    hierarchy, labels, k, cut = _morse_and_cut(
+    hierarchy, labels, report = _morse_and_cut(
         np.where(known, curvature, 0.0), cut, timings, mask=mask,
         adjacency=_mesh.edges(simplices), storage=InMemory(),
         vertex_weight=_mesh.vertex_volumes(vertices, simplices))
     used = "all vertices" if mask is None else "vertices with a complete star"
     choice = MaskChoice(mask, boundary, used, int(known.sum()))
-    return Segmentation(labels, curvature, hierarchy, k, entry.name, value_scale=None,
-                        spacing=None, timings=timings, cut=cut, mask=choice,
+    return Segmentation(labels, curvature, hierarchy, operator=entry.name, value_scale=None,
+                        spacing=None, timings=timings, mask=choice,
                         smooth_rounds=rounds, vertices=vertices, simplices=simplices,
-                        **_cut_fields(cut))
+                        **_cut_fields(report))

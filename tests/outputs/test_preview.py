@@ -95,3 +95,24 @@ def test_a_lazy_preview_given_its_range_and_labels_is_the_same_image(tmp_path):
                           value_range=(volume.min(), 2 * volume.max()), n_labels=2)
     with Image.open(other) as png:
         assert not np.array_equal(np.asarray(png.convert("RGB")), images[0])
+
+
+def test_a_thinned_curve_draws_the_curve_of_every_event():
+    # A blockwise cut sends the curve thinned (`curve_sample`: a few thousand ranks,
+    # not one number per event; issue 30). Drawn, it must be the curve of every event:
+    # at most a few pixels differ (a corner's antialiasing), none by a line.
+    import volseg.outputs.preview as preview
+    from volseg.morse import curve_sample
+
+    rng = np.random.default_rng(5)
+    p = rng.lognormal(-3, 2, 2_000_000)
+    p[:1000] = 0.0
+    sample = curve_sample(p, 3)
+    assert sample.n_positive == len(p) - 1000
+    assert len(sample) < 4096 + np.log(len(p) / 4096) / np.log(1.001) + 2
+    assert sample.values[0] == p.max() and sample.ranks[-1] == sample.n_positive - 1
+    whole = preview.persistence_panel(p, 3, 0.1, 30)
+    thinned = preview.persistence_panel(sample, 3, 0.1, 30)
+    differ = np.any(whole != thinned, axis=-1)
+    assert differ.sum() <= 40, differ.sum()
+    assert np.any(whole != preview.persistence_panel(p[: len(p) // 2], 3, 0.1, 30))

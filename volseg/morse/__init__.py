@@ -46,12 +46,15 @@ Examples
 from __future__ import annotations
 
 from ._build import descending_complex
+from ._curve import CurveSample, curve_sample
 from ._graph import grid_offsets
 from ._hierarchy import MorseHierarchy, check_cut, check_measure_cut
 from ._measures import MEASURES
+from ._on_workers import HierarchyOnWorkers
 
 __all__ = ["descending_complex", "MorseHierarchy", "grid_offsets", "check_cut",
-           "check_measure_cut", "MEASURES", "entry_kernels"]
+           "check_measure_cut", "MEASURES", "CurveSample", "curve_sample",
+           "HierarchyOnWorkers", "entry_kernels"]
 
 
 def entry_kernels() -> list:

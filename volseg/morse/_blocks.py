@@ -21,13 +21,15 @@
    the only edges that can merge components, about one per cell.
 5. On the workers: the elder-rule union-find decided in the same tree of block
    groups (`_group_tree`): each group decides the events its faces cannot change and
-   passes the rest up. The client joins the decided events in sweep order: the same
-   maxima, events and persistence as in memory, for any chunking (tested).
+   passes the rest up. One task joins the decided events in sweep order and the
+   maxima from the sample sort's buckets: the same maxima, events and persistence as
+   in memory, for any chunking (tested).
 
-The returned `MorseHierarchy` holds the per-maximum data and the events in memory and
-its `cells` as a lazy Dask array; `segment` relabels block by block. What the client
-receives is that result, the maxima in order and the decided events (65 B per maximum
-measured at 512^3): nothing else per maximum, nothing per voxel.
+`dask_hierarchy` returns that task's result kept where it was computed
+(`HierarchyOnWorkers`: on a cluster, one worker's memory), its `cells` a lazy Dask
+array; a cut runs beside it and the client receives the maxima's count and the cut's
+small result (`volseg.cuts`), nothing per maximum or per voxel (tested).
+`dask_descending_complex` fetches it whole (about 64 B per maximum).
 """
 
 from __future__ import annotations
@@ -47,9 +49,10 @@ from . import _exits, _group_tree, _kernels, _ranks
 from ._edges import _cross_edges, _saddle_order
 from ._graph import _Neighbourhood, grid_offsets
 from ._hierarchy import MorseHierarchy
+from ._on_workers import HierarchyOnWorkers
 from ._phases import _Phases
 
-__all__ = ["dask_descending_complex"]
+__all__ = ["dask_descending_complex", "dask_hierarchy"]
 
 
 def _ascend(halo, origin, shape, offsets, masked):
@@ -191,12 +194,13 @@ def _per_block(function, *arrays, **kwargs):
 
 @dataclass
 class _Maxima:
-    """Stage 2's result on the client: every maximum (gid) and its value, by decreasing
-    (value, index) (a maximum's id is its position), and the index type of the ids."""
+    """Stage 2's result: their count and the index type of their ids on the client;
+    every maximum (gid) and its value, by decreasing (value, index) (a maximum's id is
+    its position), as the sample sort's buckets kept on the workers (a Delayed)."""
 
-    gids: np.ndarray
-    values: np.ndarray
+    n_maxima: int
     index_type: type
+    buckets: object
 
 
 @dataclass
@@ -226,7 +230,14 @@ class _Grid:
 
 
 def dask_descending_complex(field, connectivity="kuhn", mask=None, hooks=None):
-    """`descending_complex` of a 3-D Dask array (see the module docstring).
+    """`descending_complex` of a 3-D Dask array (see the module docstring): the
+    `MorseHierarchy` of `dask_hierarchy`, fetched to the client."""
+    return dask_hierarchy(field, connectivity, mask, hooks).fetch()
+
+
+def dask_hierarchy(field, connectivity="kuhn", mask=None, hooks=None) -> HierarchyOnWorkers:
+    """The blockwise build, its hierarchy kept where it was assembled
+    (`HierarchyOnWorkers`: the client holds O(blocks)).
 
     `mask`: a boolean array (numpy or Dask) of the field's shape, as in memory
     (DESIGN.md section 9): the blocks see -inf outside it, so no edge leaves it;
@@ -234,12 +245,15 @@ def dask_descending_complex(field, connectivity="kuhn", mask=None, hooks=None):
 
     `hooks` (`volseg._block_hooks.BlockHooks`, from the blockwise pipeline): ``wrap``
     keeps each finished block on disk; ``compute`` runs a stage (with progress);
-    ``store`` computes the cells once into storage instead of in every later pass
-    (edges, labels); ``reread``: the field's blocks are cheap to make again, so each
-    is made again for its halo rather than kept waiting for it (the stored cells are
-    always reread); ``scratch``: a folder where the ascent keeps each block's path
-    ends (8 bytes per voxel), so that the cells pass reads them instead of climbing
-    again (removed once the cells are stored)."""
+    ``persist`` keeps a result on the workers; ``store`` computes the cells once into
+    storage instead of in every later pass (edges, labels); ``reread``: the field's
+    blocks are cheap to make again, so each is made again for its halo rather than
+    kept waiting for it (the stored cells are always reread); ``scratch``: a folder
+    where the ascent keeps each block's path ends (8 bytes per voxel), so that the
+    cells pass reads them instead of climbing again (removed once the cells are
+    stored)."""
+    import dask
+
     hooks = hooks or BlockHooks()
     values, mask = _checked_field(field, mask)
     phases = _Phases()
@@ -264,18 +278,31 @@ def dask_descending_complex(field, connectivity="kuhn", mask=None, hooks=None):
     halo_cells = with_halo(cells, -1, fresh=hooks.store is not None)
     forests = _per_block(hooks.wrap("forests", lambda h, c, block_id: _pairs_of_block(
         h, c, grid.origin(block_id), grid.shape, grid.offsets)), halo, halo_cells)
-    decided = list(hooks.compute(*_group_tree_of(forests),
-                                 stage="Morse: cross-cell edges and union-find per block group"))
+    shape = tuple(int(s) for s in grid.shape)
+    # Two steps, as the blocks' work then the join: one graph ending in the join kept
+    # every block's halo in memory at once.
+    decided = hooks.persist(*_group_tree_of(forests),
+                            stage="Morse: cross-cell edges and union-find per block group")
     phases.done("blocks: cells, cross-cell edges, union-find in block groups")
-    young, elder, target, source, saddle, saddle_values = _group_tree.assembled(
-        decided, len(maxima.gids))
+    core, = hooks.persist(dask.delayed(_core, pure=True)(shape, maxima.n_maxima,
+                                                         maxima.buckets, *decided),
+                          stage="Morse: the events joined in sweep order")
     del decided
-    phases.done("client: events in sweep order")
+    phases.done("a worker: the events joined in sweep order")
+    return HierarchyOnWorkers(core, maxima.n_maxima, shape, cells, mask, field, connectivity,
+                              phases.times, hooks)
+
+
+def _core(shape, n_maxima, buckets, *decided) -> MorseHierarchy:
+    """The hierarchy without cells, field or mask, in one task: the maxima from the
+    sample sort's buckets, the decided events joined in sweep order with their elders
+    (`_group_tree.assembled`)."""
+    young, elder, target, source, saddle, saddle_values = _group_tree.assembled(
+        list(decided), n_maxima)
     return MorseHierarchy(
-        shape=tuple(int(s) for s in grid.shape), cells=cells, maxima=maxima.gids,
-        values=maxima.values, young=young, elder=elder, target=target, source=source, saddle=saddle,
-        saddle_value=saddle_values, mask=mask, _field=field, _connectivity=connectivity,
-        timings=phases.times)
+        shape=shape, cells=None, maxima=np.concatenate([b[0] for b in buckets]),
+        values=np.concatenate([b[1] for b in buckets]), young=young, elder=elder, target=target,
+        source=source, saddle=saddle, saddle_value=saddle_values, mask=None, _field=None)
 
 
 def _checked_field(field, mask):
@@ -337,16 +364,14 @@ def _ids_and_exits(ascent, grid: _Grid, hooks) -> tuple:
     tables = [graph(_one_block, graph(_exits.table, ranks[i], leaves[i])) for i in order]
     *tables, total, buckets = hooks.persist(*graph.delayed([*tables, total, graph(list, buckets)]),
                                             stage="Morse: steepest ascent, maxima ids, exits")
-    n_maxima, buckets = hooks.compute(total, buckets, stage="Morse: the maxima, in order")
+    n_maxima, = hooks.compute(total, stage="Morse: the maxima, counted")
     if not n_maxima:
         raise ValueError("`mask` selects no vertex")
     grid_of_tables = np.empty(shape, dtype=object)
     for index, table in zip(order, tables, strict=True):
         grid_of_tables[index] = da.from_delayed(table, shape=(1, 1, 1), dtype=object)
     return (da.block(grid_of_tables.tolist()),
-            _Maxima(np.concatenate([b[0] for b in buckets]),
-                    np.concatenate([b[1] for b in buckets]),
-                    np.int32 if n_maxima < 2**31 - 1 else np.int64))
+            _Maxima(int(n_maxima), np.int32 if n_maxima < 2**31 - 1 else np.int64, buckets))
 
 
 def _no_answers():

@@ -70,7 +70,7 @@ def _merge_events(graph: _Neighbourhood, cell, n_maxima,
 
 
 def descending_complex(field: ArrayLike, *, adjacency=None, connectivity="kuhn",
-                       mask=None, block_hooks=None) -> "MorseHierarchy":
+                       mask=None, block_hooks=None, on_workers=False) -> "MorseHierarchy":
     """Descending Morse complex of `field` and its persistence hierarchy.
 
     Parameters
@@ -95,6 +95,10 @@ def descending_complex(field: ArrayLike, *, adjacency=None, connectivity="kuhn",
     block_hooks : volseg._block_hooks.BlockHooks, optional
         For a Dask `field`: how its blocks are kept and computed (the blockwise
         pipeline's work folder and progress); default plain Dask.
+    on_workers : bool
+        For a Dask `field`: return the `HierarchyOnWorkers` (its per-maximum arrays
+        kept where they were assembled, cut there) rather than fetching it whole to
+        this process; anything of `MorseHierarchy` read from it fetches it.
 
     Returns
     -------
@@ -111,9 +115,10 @@ def descending_complex(field: ArrayLike, *, adjacency=None, connectivity="kuhn",
         if adjacency is not None:
             raise ValueError("a Dask `field` is segmented on its grid; compute it (numpy) "
                              "to use `adjacency`")
-        from ._blocks import dask_descending_complex
+        from ._blocks import dask_hierarchy
 
-        return dask_descending_complex(field, connectivity, mask=mask, hooks=block_hooks)
+        hierarchy = dask_hierarchy(field, connectivity, mask=mask, hooks=block_hooks)
+        return hierarchy if on_workers else hierarchy.fetch()
     phases = _Phases()
     values, mask = _validate_field(field, mask, adjacency)
     graph = _neighbourhood(values, mask, adjacency, connectivity)

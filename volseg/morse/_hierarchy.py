@@ -123,16 +123,8 @@ class MorseHierarchy:
     def with_vertex_weight(self, weight) -> MorseHierarchy:
         """The same hierarchy with sizes counted in `weight` per vertex (a positive
         number, or one per vertex); persistence cuts are unchanged."""
-        if np.ndim(weight) == 0:
-            weight = float(weight)
-            if not (weight > 0 and np.isfinite(weight)):
-                raise ValueError(f"`weight` must be a positive number, got {weight!r}")
-        else:
-            weight = np.asarray(weight, dtype=np.float64)
-            if weight.shape != (int(np.prod(self.shape)),) or not np.all(weight >= 0):
-                raise ValueError("`weight` must hold one non-negative number per vertex "
-                                 f"({int(np.prod(self.shape))}), got shape {weight.shape}")
-        return dataclasses.replace(self, vertex_weight=weight, _pruned={})
+        return dataclasses.replace(self, vertex_weight=checked_weight(weight, self.shape),
+                                   _pruned={})
 
     @property
     def persistence(self) -> NDArray[np.float64]:
@@ -174,9 +166,24 @@ class MorseHierarchy:
             raise ValueError("persistence belongs to the events (`extinction`), not to cells")
         return self._pruning(measure)[2]
 
+    def _cell_base(self, measure):
+        """`cell_measure` before any pruning, computed once (a blockwise cut on the
+        workers is given it: `with_cell_measures`)."""
+        key = ("cells", measure)
+        if key not in self._pruned:
+            self._pruned[key] = _measures.cell_measures(self, measure)
+        return self._pruned[key]
+
+    def with_cell_measures(self, measures: dict) -> MorseHierarchy:
+        """The same hierarchy given each cell's measures ({measure: (M,) array}, as
+        `cell_measure` computes them), so that its cuts read no cell."""
+        out = dataclasses.replace(self, _pruned={})
+        out._pruned.update({("cells", m): np.asarray(v, np.float64) for m, v in measures.items()})
+        return out
+
     def _pruning(self, measure):
         if measure not in self._pruned:
-            base = _measures.cell_measures(self, measure)
+            base = self._cell_base(measure)
             order = np.empty(len(self.young), dtype=np.int64)
             extinction = np.empty(len(self.young))
             _prune.prune(self.source, self.target, len(self.maxima), base, order, extinction)
@@ -252,10 +259,7 @@ class MorseHierarchy:
         if min_share == 0 or self.n_components == 1:
             return np.zeros(len(self.maxima), dtype=bool)
         component = self.component_of_maximum()
-        if "cell sizes" not in self._pruned:       # the sizes alone, without a pruning
-            self._pruned["cell sizes"] = (self._pruned["size"][2] if "size" in self._pruned
-                                          else _measures.cell_measures(self, "size"))
-        sizes = np.bincount(component, weights=self._pruned["cell sizes"])
+        sizes = np.bincount(component, weights=self._cell_base("size"))
         return (sizes < min_share * sizes.sum())[component]
 
     def _merged_events(self, min_persistence, n_regions, measure, threshold, dropped):
@@ -359,20 +363,17 @@ class MorseHierarchy:
                                 or not out.flags.c_contiguous):
             raise ValueError(f"`out` must be a C-contiguous {region.dtype} array of the cells' "
                              f"shape {self.cells.shape}, for cells in memory")
+        table = region_table(region, self.mask is not None)
         if not lazy:
-            table = _with_outside(region, self.mask)
             out = np.empty(self.cells.shape, table.dtype) if out is None else out
             cells = np.ascontiguousarray(self.cells)
             _kernels.take(table, cells.reshape(-1), out.reshape(-1))
             return out
         import dask
 
-        # Blockwise, block by block. The table as one shared task: a distributed
-        # scheduler sends it to each worker once, not inside every block's task.
-        table = dask.delayed(_with_outside(region, self.mask), pure=True)
-        return self.cells.map_blocks(lambda cells, table: table[cells], table,
-                                     dtype=region.dtype,
-                                     meta=np.empty((0,) * self.cells.ndim, region.dtype))
+        # The table as one shared task: a distributed scheduler sends it to each
+        # worker once, not inside every block's task.
+        return relabelled(self.cells, dask.delayed(table, pure=True), table.dtype)
 
     def region_adjacency(self, labels=None, **cut):
         """The regions of a cut as a networkx graph.
@@ -461,10 +462,31 @@ def _all_but_most_persistent(p, young, keep):
     return merged
 
 
-def _with_outside(region, mask):
+def checked_weight(weight, shape):
+    """`with_vertex_weight`'s checked `weight` for a field of `shape`."""
+    if np.ndim(weight) == 0:
+        weight = float(weight)
+        if not (weight > 0 and np.isfinite(weight)):
+            raise ValueError(f"`weight` must be a positive number, got {weight!r}")
+        return weight
+    weight = np.asarray(weight, dtype=np.float64)
+    if weight.shape != (int(np.prod(shape)),) or not np.all(weight >= 0):
+        raise ValueError("`weight` must hold one non-negative number per vertex "
+                         f"({int(np.prod(shape))}), got shape {weight.shape}")
+    return weight
+
+
+def relabelled(cells, table, dtype):
+    """Lazy labels of lazy `cells` by a relabelling `table` (a Delayed of
+    `region_table`, wherever it was computed), block by block."""
+    return cells.map_blocks(lambda block, table: table[block], table, dtype=dtype,
+                            meta=np.empty((0,) * cells.ndim, dtype))
+
+
+def region_table(region, masked: bool):
     """The relabelling table of a cut: regions 1..k, and a last entry 0 for the cells
     of -1 (outside the mask) and for the regions -1 (dropped components)."""
-    if mask is None and region.size and region.min() < 0:
+    if not masked and region.size and region.min() < 0:
         raise ValueError("only a hierarchy with a mask can drop components "
                          "(`min_component`): label 0 is outside the mask")
     return np.concatenate([region + 1, np.zeros(1, dtype=region.dtype)])

@@ -14,11 +14,14 @@ of per-block sums equals the in-memory one bit for bit, whatever the chunking.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from . import _prune
 
-__all__ = ["MEASURES", "STEPS", "check_measure", "cell_measures"]
+__all__ = ["MEASURES", "STEPS", "check_measure", "cell_measures", "lazy_cell_measures",
+           "lazy_field_range"]
 
 #: The cut measures; ``persistence`` is the height of DESIGN.md section 5.
 MEASURES = ("persistence", "size", "hypervolume")
@@ -39,14 +42,24 @@ def cell_measures(hierarchy, measure: str) -> np.ndarray:
     """(M,) float64: `measure` of each maximum's cell (``size`` or ``hypervolume``)."""
     n_max = len(hierarchy.maxima)
     weight = hierarchy.vertex_weight
-    per_vertex = weight is not None and np.ndim(weight) > 0
     hypervolume = measure == "hypervolume"
+    if type(hierarchy.cells).__module__.startswith("dask."):
+        import dask
+
+        # The events' three arrays as one shared task, sent once to the worker that
+        # makes the saddles.
+        events = dask.delayed(_Events(hierarchy.source, hierarchy.target,
+                                      hierarchy.saddle_value), pure=True)
+        low_high = (dask.compute(lazy_field_range(hierarchy.cells, hierarchy._field))[0]
+                    if hypervolume else None)
+        return dask.compute(lazy_cell_measures(hierarchy.cells, hierarchy._field, n_max, weight,
+                                               events, low_high))[0]
     saddles, unit = np.zeros(0), 1.0          # a size: every term is 1, no saddle read
     if hypervolume:
-        low, high = _field_range(hierarchy)
-        unit = (high - low) / STEPS if high > low else 1.0
+        low, high = _prune.masked_range(hierarchy.cells.ravel(), hierarchy._field.ravel())
+        unit = _unit(low, high)
         saddles = _cell_saddles(hierarchy, n_max, low)
-    if per_vertex:       # a mesh: in memory, float sums
+    if weight is not None and np.ndim(weight) > 0:      # a mesh: in memory, float sums
         cells = hierarchy.cells.ravel()
         inside = cells >= 0
         terms = np.asarray(weight, dtype=np.float64)[inside]
@@ -55,20 +68,63 @@ def cell_measures(hierarchy, measure: str) -> np.ndarray:
             terms = terms * np.maximum(f - saddles[cells[inside]], 0.0)
         return np.bincount(cells[inside], weights=terms, minlength=n_max)
     sums = np.zeros(n_max, dtype=np.int64)
-    if type(hierarchy.cells).__module__.startswith("dask."):
-        # The saddles (8 B per maximum) as one shared task, sent once to each worker
-        # that needs them, not inside every block's task (a closure, pickled with each).
-        import dask
+    _prune.cell_sums(hierarchy.cells.ravel(), hierarchy._field.ravel(), saddles, unit,
+                     hypervolume, sums)
+    return _scaled(sums, weight, unit)
 
-        parts = _per_block(_block_sums, hierarchy, dask.delayed(saddles, pure=True), unit,
-                           hypervolume)
-        for ids, part in parts:
-            sums[ids] += part                                   # a block's ids are distinct
-    else:
-        _prune.cell_sums(hierarchy.cells.ravel(), hierarchy._field.ravel(), saddles, unit,
-                         hypervolume, sums)
-    scale = (1.0 if weight is None else float(weight)) * unit
-    return sums.astype(np.float64) * scale
+
+def lazy_field_range(cells, field):
+    """Delayed (min, max) of the field over the vertices that took part, from each
+    block's (a pass of its own: in the graph of the sums, every block would wait in
+    memory for the last one's range)."""
+    import dask
+
+    return dask.delayed(_range_of)(*[dask.delayed(_block_range)(c, f)
+                                     for c, f in _blocks(cells, field)])
+
+
+def lazy_cell_measures(cells, field, n_max: int, weight, events, low_high=None):
+    """`cell_measures` of lazy cells as one Delayed, every step on the workers: the
+    cells' saddles (hypervolume), each block's sums, and their total (one task: it
+    receives about 12 bytes per cell of each block, the client nothing). The
+    hypervolume with the field's `low_high` range (`lazy_field_range`, computed), the
+    size without; `events`: a Delayed of anything with the hierarchy's ``source``,
+    ``target`` and ``saddle_value`` (a `MorseHierarchy`, or `_Events`); `weight`: None
+    or a number."""
+    import dask
+
+    hypervolume = low_high is not None
+    saddles, unit = np.zeros(0), 1.0
+    if hypervolume:
+        unit = _unit(*low_high)
+        saddles = dask.delayed(_cell_saddles)(events, n_max, low_high[0])
+    parts = [dask.delayed(_block_sums)(c, f, saddles, unit, hypervolume)
+             for c, f in _blocks(cells, field)]
+    return dask.delayed(_summed)(n_max, weight, unit, *parts)
+
+
+def _blocks(cells, field) -> list:
+    """(cells, field) Delayed of each block of the lazy cells."""
+    field = field.rechunk(cells.chunks)
+    return list(zip(cells.to_delayed().ravel(), field.to_delayed().ravel(), strict=True))
+
+
+@dataclass(frozen=True)
+class _Events:
+    """The three event arrays `_cell_saddles` reads."""
+
+    source: np.ndarray
+    target: np.ndarray
+    saddle_value: np.ndarray
+
+
+def _unit(low, high) -> float:
+    """A hypervolume term's fixed-point step: `STEPS` per range of the field."""
+    return (float(high) - float(low)) / STEPS if high > low else 1.0
+
+
+def _scaled(sums, weight, unit) -> np.ndarray:
+    return sums.astype(np.float64) * ((1.0 if weight is None else float(weight)) * unit)
 
 
 def _block_sums(cells, field, saddles, unit, hypervolume):
@@ -76,27 +132,20 @@ def _block_sums(cells, field, saddles, unit, hypervolume):
     return _prune.block_sums(cells.ravel(), field.ravel(), saddles, unit, hypervolume)
 
 
-def _field_range(hierarchy) -> tuple:
-    """(min, max) of the field over the vertices that took part (one pass; per block
-    for lazy cells)."""
-    if type(hierarchy.cells).__module__.startswith("dask."):
-        def range_of(cells, field):
-            return _prune.masked_range(cells.ravel(), field.ravel())
-
-        parts = _per_block(range_of, hierarchy)
-        return float(min(p[0] for p in parts)), float(max(p[1] for p in parts))
-    low, high = _prune.masked_range(hierarchy.cells.ravel(), hierarchy._field.ravel())
-    return float(low), float(high)
+def _summed(n_max, weight, unit, *parts) -> np.ndarray:
+    sums = np.zeros(n_max, dtype=np.int64)
+    for ids, part in parts:
+        sums[ids] += part                                   # a block's ids are distinct
+    return _scaled(sums, weight, unit)
 
 
-def _per_block(function, hierarchy, *shared) -> tuple:
-    """function(cells, field, *shared) of each block of the lazy cells, computed."""
-    import dask
+def _block_range(cells, field):
+    return _prune.masked_range(cells.ravel(), field.ravel())
 
-    cells = hierarchy.cells
-    field = hierarchy._field.rechunk(cells.chunks)
-    return dask.compute(*[dask.delayed(function)(c, f, *shared) for c, f in zip(
-        cells.to_delayed().ravel(), field.to_delayed().ravel(), strict=True)])
+
+def _range_of(*parts) -> tuple:
+    """(min, max) of the field over the vertices that took part, from the blocks'."""
+    return float(min(p[0] for p in parts)), float(max(p[1] for p in parts))
 
 
 def _cell_saddles(hierarchy, n_max, low) -> np.ndarray:

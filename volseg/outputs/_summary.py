@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from .._version import __version__
+from ..cuts import LISTED_PERSISTENCES
 from ..io import Frame
 
 __all__ = ["OUTPUT_SUFFIXES", "BLOCKWISE_NIFTI_VOXELS", "PARAVIEW_SUFFIX", "PARAVIEW_VOXELS",
@@ -64,10 +65,6 @@ def output_names(stem: str, persistence_plot: bool = False, blockwise: bool = Fa
     return names
 
 
-#: How many of the largest persistences the summary lists.
-LISTED_PERSISTENCES = 200
-
-
 def input_files(paths) -> list[Path]:
     """Every file of an input's `paths`: a Zarr store is a folder, its files in name
     order, but for an OME-Zarr image's ``labels/`` (derived images, never read as the
@@ -113,12 +110,11 @@ def result_summary(result) -> dict:
         "threshold": result.threshold,
         "min_persistence": result.min_persistence,
         "min_component": result.cut.get("min_component", 0.0),
-        "n_maxima": int(len(result.hierarchy.maxima)),
+        "n_maxima": int(result.report.n_maxima),
         "persistence": {
-            "components": result.hierarchy.n_components,
-            "events": int(len(result.hierarchy.young)),
-            f"largest_{LISTED_PERSISTENCES}": np.sort(
-                result.hierarchy.event_persistence)[::-1][:LISTED_PERSISTENCES].tolist(),
+            "components": result.report.n_components,
+            "events": int(result.report.n_events),
+            f"largest_{LISTED_PERSISTENCES}": result.report.largest_persistences.tolist(),
         },
         "regions": regions,
         "spread": region_spread([r["size"] for r in regions]),

@@ -37,9 +37,7 @@ def write_result_files(paths: dict, result, values, info: dict, *, frame: Frame 
     # arrays stay lazy.
     arrays = {"labels": result.labels.astype(label_type),
               "curvature": result.curvature.astype(np.float32)}
-    hierarchy = result.hierarchy
-    curve = (*hierarchy.curve(result.measure, result.cut.get("min_component", 0.0)),
-             result.threshold)
+    curve = (result.report.curve, result.report.curve.n_components, result.threshold)
     # The writers run at once (zlib releases the GIL).
     with ThreadPoolExecutor(3) as pool:
         jobs = [pool.submit(_write_array, Path(paths[key]), arrays[kind], frame, kind,

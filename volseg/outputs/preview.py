@@ -13,6 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..morse import CurveSample, curve_sample
+
 __all__ = ["write_preview", "write_persistence_plot", "persistence_panel", "TAB20", "gray",
            "diverging", "overlay"]
 
@@ -82,9 +84,11 @@ def persistence_panel(persistence, n_components, threshold, n_regions, *, width=
 
     Parameters
     ----------
-    persistence : (E,) array of float
+    persistence : (E,) array of float, or CurveSample
         The extinction of every merge event in `measure`
-        (`MorseHierarchy.extinction`; the persistence by default).
+        (`MorseHierarchy.extinction`; the persistence by default), or the curve
+        thinned for drawing (`volseg.morse.curve_sample`: what a blockwise cut
+        sends).
     n_components : int
         Regions that never merge (one per connected component of the graph).
     threshold : float
@@ -92,8 +96,9 @@ def persistence_panel(persistence, n_components, threshold, n_regions, *, width=
     """
     from PIL import Image, ImageDraw
 
-    p = np.sort(np.asarray(persistence, dtype=float))[::-1]
-    p = p[p > 0]
+    if not isinstance(persistence, CurveSample):
+        persistence = curve_sample(persistence, n_components, thin=False)
+    p, ranks = persistence.values, persistence.ranks
     canvas = Image.new("RGB", (width, height), _BACKGROUND)
     draw = ImageDraw.Draw(canvas)
     small, medium = _font(11), _font(13)
@@ -108,7 +113,7 @@ def persistence_panel(persistence, n_components, threshold, n_regions, *, width=
     # Four decades below the largest persistence: smaller events (near-ties) all sit
     # at the left edge, where the curve starts at the count of every maximum.
     x_lo, x_hi = max(p[-1], p[0] * 1e-4) / 1.5, p[0] * 1.5
-    y_hi = n_components + len(p)
+    y_hi = n_components + persistence.n_positive
 
     def x_of(t):
         return left + (np.log10(t) - np.log10(x_lo)) / (np.log10(x_hi) - np.log10(x_lo)) * (
@@ -119,7 +124,8 @@ def persistence_panel(persistence, n_components, threshold, n_regions, *, width=
 
     box = (left, top, width - right, height - bottom)
     _curve_axes(draw, box, (x_lo, x_hi, y_hi), x_of, y_of, small, width, measure)
-    xs, ys = _curve_corners(p[::-1], x_of, y_of, (x_lo, x_hi, y_hi), n_components)
+    xs, ys = _curve_corners(p[::-1], n_components + 1 + ranks[::-1], x_of, y_of,
+                            (x_lo, x_hi, y_hi), n_components)
     draw.line(list(zip(xs.tolist(), ys.tolist(), strict=True)), fill=(31, 119, 180), width=2)
     if threshold > 0 and x_lo < threshold < x_hi:
         x = x_of(threshold)
@@ -151,11 +157,12 @@ def _curve_axes(draw, box, limits, x_of, y_of, font, width, measure="persistence
     draw.text((6, top - 12), "regions (log)", fill=_INK, font=font)
 
 
-def _curve_corners(ascending, x_of, y_of, limits, n_components) -> tuple:
+def _curve_corners(ascending, above, x_of, y_of, limits, n_components) -> tuple:
     """(xs, ys) pixel corners of the persistence staircase.
 
-    Regions at threshold t: n_components + #{p >= t}, a staircase falling at each p,
-    drawn through its corners; a corner in the same tenth of a pixel as the one
+    Regions at threshold t: n_components + #{p >= t}, a staircase falling at each p
+    from `above` (the count just below it) by one, drawn through its corners (of the
+    sampled events only, for a `CurveSample`); a corner in the same tenth of a pixel as the one
     before it is dropped: millions of events (8 M maxima at 512^3) draw the same few
     thousand pixels. A block of events at a time, so that the corners of all the
     events are never in memory at once (they were the preview's peak at 512^3).
@@ -166,7 +173,7 @@ def _curve_corners(ascending, x_of, y_of, limits, n_components) -> tuple:
     previous = np.round(np.array(start) * 10)
     for first in range(0, len(ascending), _CURVE_BLOCK):
         block = ascending[first:first + _CURVE_BLOCK]
-        counts = y_hi - np.arange(first, first + len(block))
+        counts = above[first:first + _CURVE_BLOCK]
         bx = np.repeat(x_of(np.maximum(block, x_lo)), 2)
         by = y_of(np.stack([counts, counts - 1], axis=1).ravel())
         step = np.round(np.stack([bx, by], axis=1) * 10)
