@@ -37,11 +37,10 @@ def curve_sample(extinction, n_components: int, thin: bool = True) -> CurveSampl
     p = np.sort(np.asarray(extinction, dtype=np.float64))[::-1]
     p = p[p > 0]
     n = len(p)
-    exact = EXACT
-    if not thin or n <= exact:
+    if not thin or n <= EXACT:
         ranks = np.arange(n)
     else:
-        steps = int(np.ceil(np.log(n / exact) / np.log(STEP))) + 1
-        far = np.geomspace(exact, n - 1, steps).astype(np.int64)
-        ranks = np.unique(np.concatenate([np.arange(exact), far, [n - 1]]))
+        steps = int(np.ceil(np.log(n / EXACT) / np.log(STEP))) + 1
+        far = np.geomspace(EXACT, n - 1, steps).astype(np.int64)
+        ranks = np.unique(np.concatenate([np.arange(EXACT), far, [n - 1]]))
     return CurveSample(p[ranks], ranks, n, int(n_components))

@@ -148,7 +148,7 @@ def assembled(decided: list, n_maxima: int) -> tuple:
     joined), in the in-memory sweep order (decreasing saddle, pair), with their
     elders: (young, elder, target, source, saddle, saddle value)."""
     # One column at a time, each group's copy dropped as it is joined: the peak is a
-    # column more than the events, not twice them (the client's share, issue 30).
+    # column more than the events, not twice them (the joining worker's, issue 30).
     columns = []
     for k in range(5):
         columns.append(np.concatenate([d[k] for d in decided]))

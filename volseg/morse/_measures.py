@@ -20,8 +20,7 @@ import numpy as np
 
 from . import _prune
 
-__all__ = ["MEASURES", "STEPS", "check_measure", "cell_measures", "lazy_cell_measures",
-           "lazy_field_range"]
+__all__ = ["MEASURES", "STEPS", "check_measure", "cell_measures", "lazy_cell_measures"]
 
 #: The cut measures; ``persistence`` is the height of DESIGN.md section 5.
 MEASURES = ("persistence", "size", "hypervolume")
@@ -50,10 +49,9 @@ def cell_measures(hierarchy, measure: str) -> np.ndarray:
         # makes the saddles.
         events = dask.delayed(_Events(hierarchy.source, hierarchy.target,
                                       hierarchy.saddle_value), pure=True)
-        low_high = (dask.compute(lazy_field_range(hierarchy.cells, hierarchy._field))[0]
-                    if hypervolume else None)
-        return dask.compute(lazy_cell_measures(hierarchy.cells, hierarchy._field, n_max, weight,
-                                               events, low_high))[0]
+        lazy = lazy_cell_measures(hierarchy.cells, hierarchy._field, n_max, weight, events,
+                                  (measure,), lambda d: dask.compute(d)[0])
+        return dask.compute(lazy)[0][measure]
     saddles, unit = np.zeros(0), 1.0          # a size: every term is 1, no saddle read
     if hypervolume:
         low, high = _prune.masked_range(hierarchy.cells.ravel(), hierarchy._field.ravel())
@@ -73,24 +71,29 @@ def cell_measures(hierarchy, measure: str) -> np.ndarray:
     return _scaled(sums, weight, unit)
 
 
-def lazy_field_range(cells, field):
-    """Delayed (min, max) of the field over the vertices that took part, from each
-    block's (a pass of its own: in the graph of the sums, every block would wait in
-    memory for the last one's range)."""
+def lazy_cell_measures(cells, field, n_max: int, weight, events, measures,
+                       compute) -> dict:
+    """`cell_measures` of lazy cells, {measure: Delayed (M,)} for each of `measures`,
+    every step on the workers: the cells' saddles (hypervolume), each block's sums, and
+    their total (one task: it receives about 12 bytes per cell of each block, the
+    client nothing). For the hypervolume, the field's range is computed first, by
+    ``compute(delayed) -> value``: a pass of its own, as in the graph of the sums
+    every block would wait in memory for the last one's range. `events`: a Delayed of
+    anything with the hierarchy's ``source``, ``target`` and ``saddle_value`` (a
+    `MorseHierarchy`, or `_Events`); `weight`: None or a number."""
     import dask
 
-    return dask.delayed(_range_of)(*[dask.delayed(_block_range)(c, f)
-                                     for c, f in _blocks(cells, field)])
+    low_high = None
+    if "hypervolume" in measures:
+        low_high = compute(dask.delayed(_range_of)(*[dask.delayed(_block_range)(c, f)
+                                                     for c, f in _blocks(cells, field)]))
+    return {m: _lazy_sums(cells, field, n_max, weight, events,
+                          low_high if m == "hypervolume" else None) for m in measures}
 
 
-def lazy_cell_measures(cells, field, n_max: int, weight, events, low_high=None):
-    """`cell_measures` of lazy cells as one Delayed, every step on the workers: the
-    cells' saddles (hypervolume), each block's sums, and their total (one task: it
-    receives about 12 bytes per cell of each block, the client nothing). The
-    hypervolume with the field's `low_high` range (`lazy_field_range`, computed), the
-    size without; `events`: a Delayed of anything with the hierarchy's ``source``,
-    ``target`` and ``saddle_value`` (a `MorseHierarchy`, or `_Events`); `weight`: None
-    or a number."""
+def _lazy_sums(cells, field, n_max, weight, events, low_high):
+    """One measure's Delayed sums: the hypervolume with the field's `low_high`, the
+    size without."""
     import dask
 
     hypervolume = low_high is not None

@@ -18,7 +18,7 @@ import numpy as np
 
 from .._block_hooks import BlockHooks
 from ._hierarchy import MorseHierarchy, checked_weight, region_table, relabelled
-from ._measures import lazy_cell_measures, lazy_field_range
+from ._measures import lazy_cell_measures
 
 __all__ = ["HierarchyOnWorkers"]
 
@@ -75,14 +75,9 @@ class HierarchyOnWorkers:
         import dask
 
         masked = self.mask is not None
-        low_high = None
-        if "hypervolume" in measures:
-            low_high, = self.hooks.compute(lazy_field_range(self.cells, self._field),
-                                           stage="Morse: the field's range")
-        bases = {m: lazy_cell_measures(self.cells, self._field, self.n_maxima,
-                                       self.vertex_weight, self.core,
-                                       low_high if m == "hypervolume" else None)
-                 for m in measures}
+        bases = lazy_cell_measures(
+            self.cells, self._field, self.n_maxima, self.vertex_weight, self.core, measures,
+            lambda d: self.hooks.compute(d, stage="Morse: the field's range")[0])
         task = dask.delayed(_run, pure=True)(self.core, self.vertex_weight, masked, bases,
                                              function, args)
         task, = self.hooks.persist(task, stage="Morse: the cut, where the hierarchy is")
