@@ -4,6 +4,7 @@
                                          [--schedulers threads local]
                                          [--skip-in-memory-above 512] [--folder /tmp/bw]
                                          [--smooth SIGMA] [--repeat R] [--base REV]
+                                         [--memory-limit BYTES] [--hierarchy-memory BYTES]
 
 For each size N it writes a synthetic smooth uint8 field of N^3 voxels straight to a
 Zarr store, block by block (the field is a sum of sinusoids of the global
@@ -16,8 +17,9 @@ coordinates, so no full array is ever built), then runs, each in its own process
   dask.distributed cluster of that many worker processes).
 
 It prints wall time, the peak memory of the whole process tree (RSS summed over the
-process and its children, sampled every 0.1 s with psutil) and of the client process
-alone (with ``local``, the workers are its children), the maxima and region
+process and its children, sampled every 0.1 s with psutil), of the client process
+alone (with ``local``, the workers are its children) and of its largest child (with
+``local``, the busiest worker), the maxima and region
 counts, and whether the blockwise labels equal the in-memory ones. ``--smooth``
 passes ``--smooth SIGMA`` to every run (the 8-bit staircase of a slowly varying
 field makes a maximum of the curvature every 15 voxels or so at 1024^3).
@@ -86,8 +88,9 @@ def write_inputs(folder: Path, n: int, chunks: int, npy: bool):
 
 
 def run(argv, env=None, cwd=None) -> dict:
-    """Wall time, the peak RSS of the process tree of `argv` and of its own process
-    alone (the client, with ``--scheduler local``: the workers are its children)."""
+    """Wall time, the peak RSS of the process tree of `argv`, of its own process alone
+    (the client, with ``--scheduler local``: the workers are its children) and of the
+    largest of its children (with ``local``, the busiest worker)."""
     import psutil
 
     # The child's output goes to files: a pipe nobody reads while polling would stall
@@ -96,12 +99,14 @@ def run(argv, env=None, cwd=None) -> dict:
         start = time.perf_counter()
         process = psutil.Popen(argv, env={**os.environ, **(env or {})}, stdout=out, stderr=err,
                                text=True, cwd=cwd)
-        peak = client = 0
+        peak = client = worker = 0
         while process.poll() is None:
             try:
-                tree = [process, *process.children(recursive=True)]
-                peak = max(peak, sum(p.memory_info().rss for p in tree if p.is_running()))
+                children = process.children(recursive=True)
+                sizes = [p.memory_info().rss for p in children if p.is_running()]
                 client = max(client, process.memory_info().rss)
+                peak = max(peak, process.memory_info().rss + sum(sizes))
+                worker = max(worker, *sizes, 0)
             except psutil.Error:
                 pass
             time.sleep(0.1)
@@ -110,7 +115,7 @@ def run(argv, env=None, cwd=None) -> dict:
         if process.returncode:
             raise RuntimeError(f"{' '.join(argv)} failed: {err.read().strip()[-500:]}")
         return {"seconds": seconds, "peak_gb": peak / 2**30, "client_gb": client / 2**30,
-                "stdout": out.read()}
+                "worker_gb": worker / 2**30, "stdout": out.read()}
 
 
 def labels_of(folder: Path, stem: str):
@@ -156,6 +161,9 @@ def main(argv=None) -> int:
     parser.add_argument("--memory-limit",
                         help="volseg segment --memory-limit for the blockwise runs (with "
                              "local: shared by its workers)")
+    parser.add_argument("--hierarchy-memory",
+                        help="volseg segment --hierarchy-memory for the local blockwise runs "
+                             "(one more worker, the one that holds the whole hierarchy)")
     args = parser.parse_args(argv)
     if args.base:
         from _common import worktree
@@ -182,7 +190,9 @@ def _main(args, trees) -> int:
         plain += [(f"blockwise {args.chunks}^3 {scheduler}", workers,
                    folder / f"blk{n}_{scheduler}_{workers}{tag}",
                    [str(zarr_path), "--scheduler", scheduler, "--workers", str(workers),
-                    *(["--memory-limit", args.memory_limit] if args.memory_limit else [])])
+                    *(["--memory-limit", args.memory_limit] if args.memory_limit else []),
+                    *(["--hierarchy-memory", args.hierarchy_memory]
+                      if args.hierarchy_memory and scheduler == "local" else [])])
                   for scheduler in args.schedulers for workers in args.workers]
         cases = [(path if tree == "now" else f"{path} [base]", workers,
                   out.with_name(out.name + ("" if tree == "now" else "_base")), arguments, tree)
@@ -209,15 +219,17 @@ def _main(args, trees) -> int:
                     row["runs"] = old["runs"]
                     row["peak_gb"] = max(old["peak_gb"], row["peak_gb"])
                     row["client_gb"] = max(old["client_gb"], row["client_gb"])
+                    row["worker_gb"] = max(old["worker_gb"], row["worker_gb"])
                     row["same_labels"] = None if same is None else same and old["same_labels"]
                     if old["seconds"] <= row["seconds"]:
                         row = {**old, **{k: row[k] for k in ("peak_gb", "client_gb",
-                                                             "same_labels")}}
+                                                             "worker_gb", "same_labels")}}
                 row["runs"] = [*row["runs"], round(result["seconds"], 1)]
                 best[key] = row
                 print(f"{n}^3 {path}, workers {workers}, run {repeat + 1}: "
                       f"{result['seconds']:.1f} s, peak {result['peak_gb']:.2f} GB "
-                      f"(client {result['client_gb']:.2f} GB), "
+                      f"(client {result['client_gb']:.2f} GB, largest child "
+                      f"{result['worker_gb']:.2f} GB), "
                       f"same labels as in memory: {same}", flush=True)
                 print_stages(summary.get("blockwise", {}))
         rows += best.values()
@@ -237,13 +249,13 @@ def _main(args, trees) -> int:
                   f"({seconds:.1f} s / {base:.1f} s, fastest runs)", flush=True)
     smoothed = f", smooth {args.smooth:g}" if args.smooth else ""
     print("\n| size | path | workers | wall s (fastest; every run) | peak GB (all processes) "
-          "| client GB | maxima | regions | same labels |")
-    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+          "| client GB | largest child GB | maxima | regions | same labels |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
     for r in rows:
         same = "" if r["same_labels"] is None else r["same_labels"]
         print(f"| {r['size']}^3{smoothed} | {r['path']} | {r['workers']} | {r['seconds']:.1f} "
               f"({', '.join(map(str, r['runs']))}) | {r['peak_gb']:.2f} "
-              f"| {r['client_gb']:.2f} | {r['maxima']} "
+              f"| {r['client_gb']:.2f} | {r['worker_gb']:.2f} | {r['maxima']} "
               f"| {r['regions']} | {same} |")
     return 0
 

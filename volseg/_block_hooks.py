@@ -24,7 +24,7 @@ def _dask_compute(*collections, stage: str):
     return dask.compute(*collections)
 
 
-def _dask_persist(*collections, stage: str):
+def _dask_persist(*collections, stage: str, hierarchy: bool = False):
     import dask
 
     return dask.persist(*collections)
@@ -41,9 +41,12 @@ class BlockHooks:
         them instead of computing them again (`volseg.blockwise.WorkFolder.wrap`).
     compute : callable ``(*collections, stage=name) -> results``
         Computes Dask collections (e.g. with a progress bar per stage).
-    persist : callable ``(*collections, stage=name) -> collections``
+    persist : callable ``(*collections, stage=name, hierarchy=False) -> collections``
         Computes Dask collections and keeps them where they were computed (on a
         cluster, its workers), for later graphs to use without the client holding them.
+        ``hierarchy=True``: their tasks hold a whole hierarchy; on a cluster with a
+        worker for it, every task of their graphs runs there
+        (`volseg.blockwise.Engine.persist`), so their lazy inputs are persisted first.
     store : callable ``(stage, blocks) -> blocks``, optional
         Computes a lazy array once into storage and returns it read back, so later
         passes read it instead of computing it again. None: kept lazy.

@@ -113,6 +113,10 @@ def _add_blockwise_options(seg):
                         f"{MEMORY_SHARE:g} of this machine's RAM): an input whose in-memory run "
                         "would need more (about 40 bytes per voxel) is segmented block by block; "
                         "also the local cluster's worker limits together")
+    engine.add_argument("--hierarchy-memory", metavar="BYTES",
+                        help="with --scheduler local: one more worker, of this memory, the only "
+                        "one to hold the whole Morse hierarchy (its join and its cut, about 150 "
+                        "bytes per maximum), so that the other workers can stay small")
 
 
 def _add_segment_io(seg):
@@ -274,6 +278,7 @@ def _cmd_segment(args):
     out_dir = Path(args.out_dir)
     _check_cut_options(args)
     engine = Engine(args.scheduler, workers=args.workers, memory_limit=args.memory_limit,
+                    hierarchy_memory=args.hierarchy_memory,
                     progress=not args.quiet and sys.stderr.isatty())   # arguments checked here
     engine.check()
     # Read and check every input before writing or computing anything.

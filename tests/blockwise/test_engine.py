@@ -48,6 +48,9 @@ def test_bad_engine_arguments_and_an_unreachable_scheduler(tmp_path, volume, cap
     monkeypatch.setattr(engine_module, "CONNECT_TIMEOUT", 1.0)
     for extra, message in ((["--workers", "0"], "--workers must be at least 1"),
                            (["--memory-limit", "lots"], "--memory-limit 'lots'"),
+                           (["--hierarchy-memory", "2GB"], "--hierarchy-memory adds a worker"),
+                           (["--scheduler", "local", "--hierarchy-memory", "10MB"],
+                            "--hierarchy-memory 10 MiB is less than"),
                            (["--scheduler", "tcp://127.0.0.1:9"],
                             "cannot reach the Dask scheduler")):
         out = tmp_path / "out"
@@ -219,3 +222,45 @@ def test_a_cluster_that_cannot_go_on_stops_with_one_line(monkeypatch):
     with engine_module.Engine("local", workers=1, memory_limit="300MiB") as engine:
         with pytest.raises(engine_module.EngineError, match=r"^killed: Dask workers died"):
             engine.compute(dask.delayed(hold)(400), stage="killed")
+
+
+@pytest.mark.slow
+def test_the_hierarchy_is_joined_and_cut_on_the_worker_given_for_it():
+    """With a worker of `HIERARCHY_RESOURCE` (`--hierarchy-memory`), the two tasks that
+    hold the whole hierarchy (the join of the events, the cut) run there and stay
+    there; the labels are those of the cut in memory."""
+    import dask.array as da
+
+    from volseg._block_hooks import BlockHooks
+    from volseg.cuts import cut_of
+    from volseg.morse import descending_complex
+    from volseg.segment import CutRequest
+
+    field = smooth_random_field((24, 24, 24), np.random.default_rng(5), sigma=1.5)
+    cut = CutRequest.checked(n_regions=6, measure="hypervolume")
+    with engine_module.Engine("local", workers=1, memory_limit="1GiB",
+                              hierarchy_memory="700MiB") as engine:
+        info = engine.client.scheduler_info()["workers"]
+        big = {a for a, w in info.items()
+               if w["resources"].get(engine_module.HIERARCHY_RESOURCE)}
+        assert len(info) == 2 and len(big) == 1 and "0.7 GiB for the hierarchy" in \
+            engine.describe()
+        hooks = BlockHooks(compute=engine.compute, persist=engine.persist)
+        lazy = descending_complex(da.from_array(field, chunks=8), on_workers=True,
+                                  block_hooks=hooks)
+        labels, report = cut_of(lazy, cut)
+        # Not there by chance: the scheduler was told to run them (and the cells'
+        # saddles, read from the whole hierarchy) nowhere else, and nothing else there.
+        # (Asked before the labels: a later graph naming a finished task drops its
+        # restriction.)
+        restricted = engine.client.run_on_scheduler(lambda dask_scheduler: sorted(
+            (str(k).split("-")[0], t.resource_restrictions)
+            for k, t in dask_scheduler.tasks.items() if t.resource_restrictions))
+        assert restricted == [(name, {engine_module.HIERARCHY_RESOURCE: 1})
+                              for name in ("_cell_saddles", "_core", "_run")], restricted
+        labels = np.asarray(labels.compute())
+        held = {str(k).split("-")[0]: v for k, v in engine.client.who_has().items()
+                if str(k).startswith(("_core-", "_run-"))}
+        assert set(held) == {"_core", "_run"} and all(set(v) == big for v in held.values()), held
+    expected, expected_report = cut_of(descending_complex(field), cut)
+    assert np.array_equal(labels, expected) and report.n_regions == expected_report.n_regions

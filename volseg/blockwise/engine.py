@@ -23,6 +23,14 @@ Dask's threaded scheduler in this process.
   must see the same file system as this process (inputs, outputs and the run's work
   folder are paths).
 
+The Morse build joins the whole hierarchy (the maxima in order and the merge events,
+about 150 bytes per maximum with the cut's temporaries) in one task, and cuts it in
+another beside it (`volseg.morse.HierarchyOnWorkers`). On a cluster with a worker of
+the resource `HIERARCHY_RESOURCE` those tasks run there and nowhere else (`persist`
+with ``hierarchy=True``), so the block workers can be small and one worker large:
+``hierarchy_memory`` adds that worker to a local cluster; on a running cluster, start
+one worker with ``--resources volseg_hierarchy=1`` (`docs/cluster.md`).
+
 A script that starts a local cluster needs the ``if __name__ == "__main__":`` guard
 (its worker processes are spawned and import the script).
 
@@ -42,13 +50,17 @@ from concurrent.futures import ThreadPoolExecutor
 
 from ..errors import EngineError  # noqa: F401 (re-exported)
 
-__all__ = ["Engine", "EngineError", "default_memory_limit", "parse_bytes"]
+__all__ = ["Engine", "EngineError", "HIERARCHY_RESOURCE", "default_memory_limit",
+           "parse_bytes"]
 
 MEMORY_SHARE = 0.5          # of physical RAM, the default budget of a local cluster
 CONNECT_TIMEOUT = 10.0      # seconds to reach a running scheduler
 #: A local cluster's worker below this memory pauses for good (its interpreter, numba
 #: and a block use about that much): refused up front instead.
 MIN_WORKER_MEMORY = 256 * 2**20
+#: The Dask worker resource of the one worker that holds a blockwise run's whole
+#: hierarchy (`Engine.persist`).
+HIERARCHY_RESOURCE = "volseg_hierarchy"
 
 
 def _return_freed_memory():
@@ -85,8 +97,9 @@ def default_memory_limit() -> int:
     return int(MEMORY_SHARE * physical_memory())
 
 
-def parse_bytes(text) -> int:
-    """'12GB', '800MiB', '0.5' (a share of RAM when < 1) or a number of bytes."""
+def parse_bytes(text, option: str = "--memory-limit") -> int:
+    """'12GB', '800MiB', '0.5' (a share of RAM when < 1) or a number of bytes; the
+    error names `option`."""
     from dask.utils import parse_bytes as dask_bytes
 
     try:
@@ -95,10 +108,10 @@ def parse_bytes(text) -> int:
         try:
             value = float(dask_bytes(str(text)))
         except (TypeError, ValueError):
-            raise EngineError(f"--memory-limit {text!r}: expected bytes (e.g. 12GB, 800MiB) "
+            raise EngineError(f"{option} {text!r}: expected bytes (e.g. 12GB, 800MiB) "
                               "or a share of RAM below 1 (e.g. 0.5)") from None
     if not (value > 0 and math.isfinite(value)):            # NaN, inf, 0, negative
-        raise EngineError(f"--memory-limit must be a positive finite size, got {text!r}")
+        raise EngineError(f"{option} must be a positive finite size, got {text!r}")
     return int(value * physical_memory()) if value < 1 else int(value)
 
 
@@ -128,13 +141,25 @@ class Engine:
     """A context manager: the Dask engine of a blockwise run (see the module)."""
 
     def __init__(self, scheduler: str | None = None, *, workers: int | None = None,
-                 memory_limit=None, progress: bool = False, timeout: float | None = None):
+                 memory_limit=None, hierarchy_memory=None, progress: bool = False,
+                 timeout: float | None = None):
         if workers is not None and workers < 1:
             raise EngineError(f"--workers must be at least 1, got {workers}")
         self.scheduler = scheduler
         self.workers = workers or os.cpu_count() or 1
         self.memory_limit = (default_memory_limit() if memory_limit is None
                              else parse_bytes(memory_limit))
+        if hierarchy_memory is not None and scheduler != "local":
+            raise EngineError(
+                "--hierarchy-memory adds a worker to the local cluster (--scheduler local); "
+                f"on a running cluster start one worker with --resources {HIERARCHY_RESOURCE}=1")
+        #: The memory of the local cluster's hierarchy worker (`persist`), or None.
+        self.hierarchy_memory = (None if hierarchy_memory is None
+                                 else parse_bytes(hierarchy_memory, "--hierarchy-memory"))
+        if self.hierarchy_memory is not None and self.hierarchy_memory < MIN_WORKER_MEMORY:
+            raise EngineError(f"--hierarchy-memory {self.hierarchy_memory / 2**20:.0f} MiB is "
+                              f"less than the {MIN_WORKER_MEMORY // 2**20} MiB a worker needs")
+        self._hierarchy_worker = False
         self.progress = progress
         self.timeout = CONNECT_TIMEOUT if timeout is None else timeout
         self.client = None
@@ -152,8 +177,10 @@ class Engine:
         if self.threaded:
             return f"Dask threads ({self.workers})"
         if self.scheduler == "local":
+            extra = ("" if self.hierarchy_memory is None else
+                     f", and one of {self.hierarchy_memory / 2**30:.1f} GiB for the hierarchy")
             return (f"local Dask cluster ({self.workers} workers, "
-                    f"{self.memory_limit / self.workers / 2**30:.1f} GiB each)")
+                    f"{self.memory_limit / self.workers / 2**30:.1f} GiB each{extra})")
         return f"Dask scheduler {self.scheduler}"
 
     def __enter__(self) -> Engine:
@@ -174,6 +201,11 @@ class Engine:
                 # peer-to-peer shuffle logs a warning per rechunk.
                 self._stack.enter_context(dask.config.set({"array.rechunk.method": "tasks"}))
                 self.client = self._stack.enter_context(self._client())
+                if self.hierarchy_memory is not None:
+                    self.client.wait_for_workers(self.workers + 1, timeout=120)
+                self._hierarchy_worker = any(
+                    HIERARCHY_RESOURCE in (w.get("resources") or {})
+                    for w in self.client.scheduler_info()["workers"].values())
         except BaseException:
             self._stack.close()
             raise
@@ -181,7 +213,7 @@ class Engine:
 
     def __exit__(self, kind, error, traceback):
         self._stack.close()
-        self.client = None
+        self.client, self._hierarchy_worker = None, False
         if kind is not None and kind.__name__ == "KilledWorker":     # outside `compute`
             raise self._over_limit(_KILLED) from None
 
@@ -231,6 +263,13 @@ class Engine:
                                dashboard_address=None, env={"NUMBA_NUM_THREADS": "1"},
                                silence_logs=logging.CRITICAL)
         self._stack.callback(cluster.close)
+        if self.hierarchy_memory is not None:
+            # One more worker of the same kind, its own memory, the hierarchy's resource.
+            (_, spec), = cluster.new_worker_spec().items()
+            spec = {**spec, "options": {**spec["options"], "memory_limit": self.hierarchy_memory,
+                                        "resources": {HIERARCHY_RESOURCE: 1}}}
+            cluster.worker_spec["hierarchy"] = spec
+            cluster.scale(len(cluster.worker_spec))
         return Client(cluster)
 
     def compute(self, *collections, stage: str = "computing"):
@@ -254,20 +293,27 @@ class Engine:
             with ProgressBar(out=sys.stderr, minimum=1.0):
                 return dask.compute(*collections)
 
-    def persist(self, *collections, stage: str = "computing"):
+    def persist(self, *collections, stage: str = "computing", hierarchy: bool = False):
         """`dask.persist(*collections)` (Delayed): computed now, with the progress of
         `compute`, and kept where each was computed (on a cluster, in its workers'
-        memory: the client receives none of it) for later graphs to read."""
+        memory: the client receives none of it) for later graphs to read.
+
+        `hierarchy`: they hold a whole hierarchy. On a cluster with a worker of
+        `HIERARCHY_RESOURCE`, every task of their graphs runs on it (persist their
+        lazy inputs first, or those run there too)."""
         import dask
 
         if self.client is None:
             if self.progress:
                 print(f"  {stage}", file=sys.stderr, flush=True)
             return dask.persist(*collections)
-        futures = self._watched(collections, stage, gather=False)
+        # A worker restriction given to the compute, not a `dask.annotate`: annotations
+        # leak into a task's dependencies passed in containers (dask 2026.8).
+        futures = self._watched(collections, stage, gather=False, resources={
+            HIERARCHY_RESOURCE: 1} if hierarchy and self._hierarchy_worker else None)
         return tuple(dask.delayed(future) for future in futures)
 
-    def _watched(self, collections, stage: str, gather: bool = True):
+    def _watched(self, collections, stage: str, gather: bool = True, resources=None):
         """The distributed compute of `compute`, stopped with one line when the
         cluster cannot go on: a task whose workers died `KilledWorker` times (over
         their memory limit), or every worker paused at its limit for `STALL_SECONDS`
@@ -277,7 +323,7 @@ class Engine:
         from distributed import KilledWorker, progress
 
         start, sent = time.perf_counter(), self._sent()
-        futures = self.client.compute(list(collections))
+        futures = self.client.compute(list(collections), resources=resources)
         watchdog = _Watchdog(self.client, futures, STALL_SECONDS)
         try:
             with watchdog:
@@ -326,8 +372,13 @@ class Engine:
         limit, and what to change."""
         limit = (f"{self.memory_limit / self.workers / 2**20:.0f} MiB per worker"
                  if self.scheduler == "local" else f"the cluster at {self.scheduler}")
+        if self.hierarchy_memory is not None:
+            limit += f", {self.hierarchy_memory / 2**20:.0f} MiB for the hierarchy"
+        where = ("--hierarchy-memory" if self.scheduler == "local"
+                 else f"a worker of resource {HIERARCHY_RESOURCE}=1")
         return EngineError(f"{what} ({limit}); give more --memory-limit, fewer --workers or "
-                           "smaller --chunks")
+                           "smaller --chunks (the join and the cut of the Morse hierarchy run "
+                           f"on one worker, about 150 bytes per maximum: {where})")
 
 
 def _peak_rss() -> int:

@@ -286,7 +286,7 @@ def dask_hierarchy(field, connectivity="kuhn", mask=None, hooks=None) -> Hierarc
     phases.done("blocks: cells, cross-cell edges, union-find in block groups")
     core, = hooks.persist(dask.delayed(_core, pure=True)(shape, maxima.n_maxima,
                                                          maxima.buckets, *decided),
-                          stage="Morse: the events joined in sweep order")
+                          stage="Morse: the events joined in sweep order", hierarchy=True)
     del decided
     phases.done("a worker: the events joined in sweep order")
     return HierarchyOnWorkers(core, maxima.n_maxima, shape, cells, mask, field, connectivity,

@@ -72,7 +72,7 @@ def cell_measures(hierarchy, measure: str) -> np.ndarray:
 
 
 def lazy_cell_measures(cells, field, n_max: int, weight, events, measures,
-                       compute) -> dict:
+                       compute, place=None) -> dict:
     """`cell_measures` of lazy cells, {measure: Delayed (M,)} for each of `measures`,
     every step on the workers: the cells' saddles (hypervolume), each block's sums, and
     their total (one task: it receives about 12 bytes per cell of each block, the
@@ -80,7 +80,9 @@ def lazy_cell_measures(cells, field, n_max: int, weight, events, measures,
     ``compute(delayed) -> value``: a pass of its own, as in the graph of the sums
     every block would wait in memory for the last one's range. `events`: a Delayed of
     anything with the hierarchy's ``source``, ``target`` and ``saddle_value`` (a
-    `MorseHierarchy`, or `_Events`); `weight`: None or a number."""
+    `MorseHierarchy`, or `_Events`); `weight`: None or a number. ``place(delayed) ->
+    delayed``, if given, computes the one task that reads the whole `events` (the
+    cells' saddles) where they are, and keeps it there."""
     import dask
 
     low_high = None
@@ -88,10 +90,11 @@ def lazy_cell_measures(cells, field, n_max: int, weight, events, measures,
         low_high = compute(dask.delayed(_range_of)(*[dask.delayed(_block_range)(c, f)
                                                      for c, f in _blocks(cells, field)]))
     return {m: _lazy_sums(cells, field, n_max, weight, events,
-                          low_high if m == "hypervolume" else None) for m in measures}
+                          low_high if m == "hypervolume" else None, place)
+            for m in measures}
 
 
-def _lazy_sums(cells, field, n_max, weight, events, low_high):
+def _lazy_sums(cells, field, n_max, weight, events, low_high, place):
     """One measure's Delayed sums: the hypervolume with the field's `low_high`, the
     size without."""
     import dask
@@ -101,6 +104,8 @@ def _lazy_sums(cells, field, n_max, weight, events, low_high):
     if hypervolume:
         unit = _unit(*low_high)
         saddles = dask.delayed(_cell_saddles)(events, n_max, low_high[0])
+        if place is not None:
+            saddles = place(saddles)
     parts = [dask.delayed(_block_sums)(c, f, saddles, unit, hypervolume)
              for c, f in _blocks(cells, field)]
     return dask.delayed(_summed)(n_max, weight, unit, *parts)

@@ -75,17 +75,23 @@ class HierarchyOnWorkers:
         import dask
 
         masked = self.mask is not None
+        persist = self.hooks.persist
         bases = lazy_cell_measures(
             self.cells, self._field, self.n_maxima, self.vertex_weight, self.core, measures,
-            lambda d: self.hooks.compute(d, stage="Morse: the field's range")[0])
-        task = dask.delayed(_run, pure=True)(self.core, self.vertex_weight, masked, bases,
-                                             function, args)
-        task, = self.hooks.persist(task, stage="Morse: the cut, where the hierarchy is")
+            lambda d: self.hooks.compute(d, stage="Morse: the field's range")[0],
+            place=lambda d: persist(d, stage="Morse: the cells' saddles, where the hierarchy "
+                                    "is", hierarchy=True)[0])
+        # The sums first, on any worker: every task in the cut's graph goes where it does.
+        sums = persist(*bases.values(), stage="Morse: the cells' measures") if bases else ()
+        task = dask.delayed(_run, pure=True)(self.core, self.vertex_weight, masked, function,
+                                             args, tuple(bases), *sums)
+        task, = persist(task, stage="Morse: the cut, where the hierarchy is", hierarchy=True)
         result, = self.hooks.compute(task[1], stage="Morse: the cut's result")
         return relabelled(self.cells, task[0], np.int32), result
 
 
-def _run(core, weight, masked, bases, function, args) -> tuple:
-    hierarchy = dataclasses.replace(core, vertex_weight=weight).with_cell_measures(bases)
+def _run(core, weight, masked, function, args, names, *sums) -> tuple:
+    hierarchy = dataclasses.replace(core, vertex_weight=weight).with_cell_measures(
+        dict(zip(names, sums, strict=True)))
     region, result = function(hierarchy, masked, *args)
     return region_table(region, masked), result
