@@ -222,6 +222,14 @@ def test_a_cluster_that_cannot_go_on_stops_with_one_line(monkeypatch):
     with engine_module.Engine("local", workers=1, memory_limit="300MiB") as engine:
         with pytest.raises(engine_module.EngineError, match=r"^killed: Dask workers died"):
             engine.compute(dask.delayed(hold)(400), stage="killed")
+    # A task that holds the hierarchy runs on its worker only, and its line says so:
+    # the 1 GiB worker would have held it.
+    with engine_module.Engine("local", workers=1, memory_limit="1GiB",
+                              hierarchy_memory="300MiB") as engine:
+        with pytest.raises(engine_module.EngineError,
+                           match=r"^joined: Dask workers died .*300 MiB for the hierarchy\); "
+                                 r"this task holds the whole Morse hierarchy .*--hierarchy-memory"):
+            engine.persist(dask.delayed(hold)(400), stage="joined", hierarchy=True)
 
 
 @pytest.mark.slow

@@ -181,7 +181,8 @@ class Engine:
                      f", and one of {self.hierarchy_memory / 2**30:.1f} GiB for the hierarchy")
             return (f"local Dask cluster ({self.workers} workers, "
                     f"{self.memory_limit / self.workers / 2**30:.1f} GiB each{extra})")
-        return f"Dask scheduler {self.scheduler}"
+        return f"Dask scheduler {self.scheduler}" + (
+            " (and a worker for the hierarchy)" if self._hierarchy_worker else "")
 
     def __enter__(self) -> Engine:
         import dask
@@ -309,11 +310,10 @@ class Engine:
             return dask.persist(*collections)
         # A worker restriction given to the compute, not a `dask.annotate`: annotations
         # leak into a task's dependencies passed in containers (dask 2026.8).
-        futures = self._watched(collections, stage, gather=False, resources={
-            HIERARCHY_RESOURCE: 1} if hierarchy and self._hierarchy_worker else None)
+        futures = self._watched(collections, stage, gather=False, hierarchy=hierarchy)
         return tuple(dask.delayed(future) for future in futures)
 
-    def _watched(self, collections, stage: str, gather: bool = True, resources=None):
+    def _watched(self, collections, stage: str, gather: bool = True, hierarchy: bool = False):
         """The distributed compute of `compute`, stopped with one line when the
         cluster cannot go on: a task whose workers died `KilledWorker` times (over
         their memory limit), or every worker paused at its limit for `STALL_SECONDS`
@@ -323,6 +323,7 @@ class Engine:
         from distributed import KilledWorker, progress
 
         start, sent = time.perf_counter(), self._sent()
+        resources = {HIERARCHY_RESOURCE: 1} if hierarchy and self._hierarchy_worker else None
         futures = self.client.compute(list(collections), resources=resources)
         watchdog = _Watchdog(self.client, futures, STALL_SECONDS)
         try:
@@ -345,11 +346,11 @@ class Engine:
                 return results
         except KilledWorker:
             self.client.cancel(futures)
-            raise self._over_limit(f"{stage}: {_KILLED}") from None
+            raise self._over_limit(f"{stage}: {_KILLED}", hierarchy) from None
         except CancelledError:
             if watchdog.reason is None:
                 raise
-            raise self._over_limit(f"{stage}: {watchdog.reason}") from None
+            raise self._over_limit(f"{stage}: {watchdog.reason}", hierarchy) from None
 
     def _sent(self) -> int:
         """The bytes every worker has sent so far (to other workers and to clients)."""
@@ -367,18 +368,22 @@ class Engine:
                             "client_received_bytes": int(sum(sizeof(r) for r in results)),
                             "client_peak_bytes": _peak_rss()})
 
-    def _over_limit(self, what: str) -> EngineError:
+    def _over_limit(self, what: str, hierarchy: bool = False) -> EngineError:
         """The one line of a cluster stopped at its memory limit: `what` happened, the
-        limit, and what to change."""
+        limit, and what to change (`hierarchy`: in a task that holds a whole
+        hierarchy)."""
         limit = (f"{self.memory_limit / self.workers / 2**20:.0f} MiB per worker"
                  if self.scheduler == "local" else f"the cluster at {self.scheduler}")
         if self.hierarchy_memory is not None:
             limit += f", {self.hierarchy_memory / 2**20:.0f} MiB for the hierarchy"
-        where = ("--hierarchy-memory" if self.scheduler == "local"
-                 else f"a worker of resource {HIERARCHY_RESOURCE}=1")
+        if hierarchy:
+            where = ("--hierarchy-memory" if self.scheduler == "local"
+                     else f"a worker of resource {HIERARCHY_RESOURCE}=1")
+            return EngineError(f"{what} ({limit}); this task holds the whole Morse hierarchy "
+                               f"(about 150 bytes per maximum) on one worker: give it one with "
+                               f"that memory ({where})")
         return EngineError(f"{what} ({limit}); give more --memory-limit, fewer --workers or "
-                           "smaller --chunks (the join and the cut of the Morse hierarchy run "
-                           f"on one worker, about 150 bytes per maximum: {where})")
+                           "smaller --chunks")
 
 
 def _peak_rss() -> int:
