@@ -203,7 +203,11 @@ class Engine:
                 self._stack.enter_context(dask.config.set({"array.rechunk.method": "tasks"}))
                 self.client = self._stack.enter_context(self._client())
                 if self.hierarchy_memory is not None:
-                    self.client.wait_for_workers(self.workers + 1, timeout=120)
+                    try:
+                        self.client.wait_for_workers(self.workers + 1, timeout=120)
+                    except TimeoutError:
+                        raise EngineError("--hierarchy-memory: the local cluster's hierarchy "
+                                          "worker did not start within 120 s") from None
                 self._hierarchy_worker = any(
                     HIERARCHY_RESOURCE in (w.get("resources") or {})
                     for w in self.client.scheduler_info()["workers"].values())
