@@ -102,10 +102,11 @@ def run(argv, env=None, cwd=None) -> dict:
         peak = client = worker = 0
         while process.poll() is None:
             try:
-                children = process.children(recursive=True)
-                sizes = [p.memory_info().rss for p in children if p.is_running()]
-                client = max(client, process.memory_info().rss)
-                peak = max(peak, process.memory_info().rss + sum(sizes))
+                own = process.memory_info().rss
+                sizes = [p.memory_info().rss for p in process.children(recursive=True)
+                         if p.is_running()]
+                client = max(client, own)
+                peak = max(peak, own + sum(sizes))
                 worker = max(worker, *sizes, 0)
             except psutil.Error:
                 pass

@@ -55,6 +55,7 @@ __all__ = ["Engine", "EngineError", "HIERARCHY_RESOURCE", "default_memory_limit"
 
 MEMORY_SHARE = 0.5          # of physical RAM, the default budget of a local cluster
 CONNECT_TIMEOUT = 10.0      # seconds to reach a running scheduler
+WORKER_START_TIMEOUT = 120.0    # seconds for a local cluster's hierarchy worker to join
 #: A local cluster's worker below this memory pauses for good (its interpreter, numba
 #: and a block use about that much): refused up front instead.
 MIN_WORKER_MEMORY = 256 * 2**20
@@ -204,10 +205,12 @@ class Engine:
                 self.client = self._stack.enter_context(self._client())
                 if self.hierarchy_memory is not None:
                     try:
-                        self.client.wait_for_workers(self.workers + 1, timeout=120)
+                        self.client.wait_for_workers(self.workers + 1,
+                                                     timeout=WORKER_START_TIMEOUT)
                     except TimeoutError:
                         raise EngineError("--hierarchy-memory: the local cluster's hierarchy "
-                                          "worker did not start within 120 s") from None
+                                          f"worker did not start within "
+                                          f"{WORKER_START_TIMEOUT:g} s") from None
                 self._hierarchy_worker = any(
                     HIERARCHY_RESOURCE in (w.get("resources") or {})
                     for w in self.client.scheduler_info()["workers"].values())
@@ -312,8 +315,6 @@ class Engine:
             if self.progress:
                 print(f"  {stage}", file=sys.stderr, flush=True)
             return dask.persist(*collections)
-        # A worker restriction given to the compute, not a `dask.annotate`: annotations
-        # leak into a task's dependencies passed in containers (dask 2026.8).
         futures = self._watched(collections, stage, gather=False, hierarchy=hierarchy)
         return tuple(dask.delayed(future) for future in futures)
 
@@ -327,6 +328,8 @@ class Engine:
         from distributed import KilledWorker, progress
 
         start, sent = time.perf_counter(), self._sent()
+        # A worker restriction given to the compute, not a `dask.annotate`: annotations
+        # leak into a task's dependencies passed in containers (dask 2026.8).
         resources = {HIERARCHY_RESOURCE: 1} if hierarchy and self._hierarchy_worker else None
         futures = self.client.compute(list(collections), resources=resources)
         watchdog = _Watchdog(self.client, futures, STALL_SECONDS)
