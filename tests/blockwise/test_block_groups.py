@@ -151,6 +151,28 @@ def test_the_client_holds_no_outer_layer(monkeypatch):
     assert_same_hierarchy(lazy, descending_complex(field))
 
 
+@pytest.mark.parametrize("chunks", [(2, 3, 4), (9, 5, 3)])
+def test_the_ascent_gives_the_range_a_hypervolume_cut_reads(chunks):
+    # The field's range in the mask comes from the ascent's blocks (no pass of its
+    # own): the extremes outside the mask, and blocks with no voxel in it, count not.
+    from volseg.cuts import cut_of
+    from volseg.segment import CutRequest
+
+    rng = np.random.default_rng(4)
+    field = rng.integers(0, 6, (9, 8, 12)).astype(np.float32)
+    mask = rng.random(field.shape) > 0.3
+    field[0, 0, 0], field[-1, -1, -1] = -50, 50
+    mask[0, 0, 0] = mask[-1, -1, -1] = False
+    mask[:, :, 9:] = False                   # whole blocks outside it
+    lazy = descending_complex(da.from_array(field, chunks=chunks), mask=mask, on_workers=True)
+    assert lazy.field_range == (float(field[mask].min()), float(field[mask].max())) == (0, 5)
+    cut = CutRequest.checked(n_regions=7, measure="hypervolume")
+    labels, report = cut_of(lazy, cut)
+    expected, expected_report = cut_of(descending_complex(field, mask=mask), cut)
+    assert np.array_equal(np.asarray(labels), expected)
+    assert np.array_equal(report.curve.values, expected_report.curve.values)
+
+
 @pytest.mark.parametrize("measure", ["hypervolume", "size", "persistence"])
 def test_a_cut_on_the_workers_sends_the_client_nothing_per_maximum(measure):
     # The pipeline's path (issue 30): the hierarchy kept where it was assembled, cut

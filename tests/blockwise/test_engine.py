@@ -234,9 +234,10 @@ def test_a_cluster_that_cannot_go_on_stops_with_one_line(monkeypatch):
 
 @pytest.mark.slow
 def test_the_hierarchy_is_joined_and_cut_on_the_worker_given_for_it():
-    """With a worker of `HIERARCHY_RESOURCE` (`--hierarchy-memory`), the two tasks that
-    hold the whole hierarchy (the join of the events, the cut) run there and stay
-    there; the labels are those of the cut in memory."""
+    """With a worker of `HIERARCHY_RESOURCE` (`--hierarchy-memory`), the tasks that
+    hold arrays of every maximum (the join of the events, the cells' saddles, their
+    measures' totals, the cut) run there and the hierarchy and the cut stay there;
+    the labels are those of the cut in memory."""
     import dask.array as da
 
     from volseg._block_hooks import BlockHooks
@@ -257,15 +258,16 @@ def test_the_hierarchy_is_joined_and_cut_on_the_worker_given_for_it():
         lazy = descending_complex(da.from_array(field, chunks=8), on_workers=True,
                                   block_hooks=hooks)
         labels, report = cut_of(lazy, cut)
-        # Not there by chance: the scheduler was told to run them (and the cells'
-        # saddles, read from the whole hierarchy) nowhere else, and nothing else there.
+        # Not there by chance: the scheduler was told to run them nowhere else, and
+        # nothing else there (the blocks' sums, each reading a block, go anywhere).
         # (Asked before the labels: a later graph naming a finished task drops its
         # restriction.)
         restricted = engine.client.run_on_scheduler(lambda dask_scheduler: sorted(
             (str(k).split("-")[0], t.resource_restrictions)
             for k, t in dask_scheduler.tasks.items() if t.resource_restrictions))
         assert restricted == [(name, {engine_module.HIERARCHY_RESOURCE: 1})
-                              for name in ("_cell_saddles", "_core", "_run")], restricted
+                              for name in ("_cell_saddles", "_core", "_run", "_summed")], \
+            restricted
         labels = np.asarray(labels.compute())
         held = {str(k).split("-")[0]: v for k, v in engine.client.who_has().items()
                 if str(k).startswith(("_core-", "_run-"))}

@@ -102,8 +102,9 @@ class BlockwiseStorage(Storage):
             "operator": request.operator.name, "value_scale": request.value_scale,
             "padding": request.padding, "connectivity": "kuhn",
             "smooth": request.smooth_sigma, "mask": choice.used,
-            # 3: ascent ends kept; 4: one stage sequence; 5: forests with faces
-            "block_layout": 5})
+            # 3: ascent ends kept; 4: one stage sequence; 5: forests with faces;
+            # 6: the ascent's blocks with their range
+            "block_layout": 6})
         if self.work.resumed:
             done = ", ".join(f"{stage} {self.work.finished(stage)}" for stage in
                              ("smoothed", "curvature", "ascent", "cells", "forests"))

@@ -34,6 +34,7 @@ small result (`volseg.cuts`), nothing per maximum or per voxel (tested).
 
 from __future__ import annotations
 
+import operator
 import os
 import shutil
 from dataclasses import dataclass
@@ -45,7 +46,8 @@ from .._block_hooks import BlockHooks
 from .._halo import block_starts, with_halo
 from .._task_graph import TaskGraph
 from . import _block_kernels as kernels
-from . import _exits, _group_tree, _kernels, _ranks
+from . import _exits, _group_tree, _kernels, _measures, _ranks
+from ._block_objects import only, per_block
 from ._edges import _cross_edges, _saddle_order
 from ._graph import _Neighbourhood, grid_offsets
 from ._hierarchy import MorseHierarchy
@@ -90,9 +92,10 @@ def _masked(field, mask):
 
 
 def _summary_of_block(halo, origin, shape, offsets, masked, ends_file=None):
-    """Stage 1: (maxima gids, their values, outer-layer gids, their path ends); the
-    outer layer's voxels outside the mask are left out (no path reaches them).
-    `ends_file`: also keep every voxel's path end there (for `_cells_of_ends`)."""
+    """Stage 1: (maxima gids, their values, outer-layer gids, their path ends, the
+    block's (min, max) in the mask: (inf, -inf) if it has none); the outer layer's
+    voxels outside the mask are left out (no path reaches them). `ends_file`: also
+    keep every voxel's path end there (for `_cells_of_ends`)."""
     result, values = _ascend(halo, origin, shape, offsets, masked)
     if ends_file is not None:
         _atomic.write_atomically(ends_file, np.save, result)
@@ -105,7 +108,9 @@ def _summary_of_block(halo, origin, shape, offsets, masked, ends_file=None):
     inner = values[1:-1, 1:-1, 1:-1].ravel()
     layer = _outer_layer(result)
     layer = layer[flat[layer] != kernels.OUTSIDE]
-    return (gids.ravel()[is_max], inner[is_max], gids.ravel()[layer], flat[layer])
+    inside = inner[inner > -np.inf]
+    low_high = np.array([inside.min(), inside.max()] if len(inside) else [np.inf, -np.inf])
+    return (gids.ravel()[is_max], inner[is_max], gids.ravel()[layer], flat[layer], low_high)
 
 
 def _cells_of_block(halo, origin, shape, offsets, masked, keys, ids):
@@ -177,30 +182,18 @@ def _faces(halo_cells, origin, shape) -> list:
     return faces
 
 
-def _per_block(function, *arrays, **kwargs):
-    """Run `function(*blocks, block_id=...)` on every block and return its results, one
-    object per block, as an (object) array of the block grid, through `map_blocks` (one
-    small graph: no per-block copy of it, which `to_delayed` would make)."""
-    import dask.array as da
-
-    def wrapped(*blocks, block_id=None):
-        out = np.empty((1,) * blocks[0].ndim, dtype=object)
-        out[(0,) * blocks[0].ndim] = function(*blocks, block_id=block_id, **kwargs)
-        return out
-    return da.map_blocks(wrapped, *arrays, dtype=object,
-                         chunks=tuple((1,) * len(c) for c in arrays[0].chunks),
-                         meta=np.empty((0,) * 3, object))
-
-
 @dataclass
 class _Maxima:
     """Stage 2's result: their count and the index type of their ids on the client;
     every maximum (gid) and its value, by decreasing (value, index) (a maximum's id is
-    its position), as the sample sort's buckets kept on the workers (a Delayed)."""
+    its position), as the sample sort's buckets kept on the workers (a Delayed); the
+    field's (min, max) in the mask, from the ascent's blocks (what a hypervolume's
+    fixed point needs: no pass of its own)."""
 
     n_maxima: int
     index_type: type
     buckets: object
+    low_high: tuple
 
 
 @dataclass
@@ -263,7 +256,7 @@ def dask_hierarchy(field, connectivity="kuhn", mask=None, hooks=None) -> Hierarc
     if grid.scratch is not None:
         os.makedirs(grid.scratch, exist_ok=True)
     halo = with_halo(values, -np.inf, fresh=hooks.reread)
-    ascent = _per_block(hooks.wrap("ascent", lambda h, block_id: _summary_of_block(
+    ascent = per_block(hooks.wrap("ascent", lambda h, block_id: _summary_of_block(
         h, grid.origin(block_id), grid.shape, grid.offsets, grid.masked,
         grid.ends_file(block_id))), halo)
     tables, maxima = _ids_and_exits(ascent, grid, hooks)
@@ -276,7 +269,7 @@ def dask_hierarchy(field, connectivity="kuhn", mask=None, hooks=None) -> Hierarc
         if grid.scratch is not None:    # every cell is stored: the ends are not read again
             shutil.rmtree(grid.scratch, ignore_errors=True)
     halo_cells = with_halo(cells, -1, fresh=hooks.store is not None)
-    forests = _per_block(hooks.wrap("forests", lambda h, c, block_id: _pairs_of_block(
+    forests = per_block(hooks.wrap("forests", lambda h, c, block_id: _pairs_of_block(
         h, c, grid.origin(block_id), grid.shape, grid.offsets)), halo, halo_cells)
     shape = tuple(int(s) for s in grid.shape)
     # Two steps, as the blocks' work then the join: one graph ending in the join kept
@@ -290,7 +283,7 @@ def dask_hierarchy(field, connectivity="kuhn", mask=None, hooks=None) -> Hierarc
     del decided
     phases.done("a worker: the events joined in sweep order")
     return HierarchyOnWorkers(core, maxima.n_maxima, shape, cells, mask, field, connectivity,
-                              phases.times, hooks)
+                              phases.times, hooks, field_range=maxima.low_high)
 
 
 def _core(shape, n_maxima, buckets, *decided) -> MorseHierarchy:
@@ -337,7 +330,7 @@ def _ids_and_exits(ascent, grid: _Grid, hooks) -> tuple:
     graph = TaskGraph("morse-ids", [ascent])
     shape = ascent.numblocks
     order = list(np.ndindex(shape))
-    summaries = {i: graph(_only, (ascent.name, *i)) for i in order}
+    summaries = {i: graph(only, (ascent.name, *i)) for i in order}
     ranks, total, buckets = _ranks.ranks_of(graph, [graph(_maxima_of, summaries[i])
                                                     for i in order], _buckets(len(order)))
     ranks = dict(zip(order, ranks, strict=True))
@@ -362,16 +355,20 @@ def _ids_and_exits(ascent, grid: _Grid, hooks) -> tuple:
                                        answers[index], half)
     leaves = {groups[i][0]: answers[i] for i in range(len(groups)) if groups[i][2] is None}
     tables = [graph(_one_block, graph(_exits.table, ranks[i], leaves[i])) for i in order]
-    *tables, total, buckets = hooks.persist(*graph.delayed([*tables, total, graph(list, buckets)]),
-                                            stage="Morse: steepest ascent, maxima ids, exits")
-    n_maxima, = hooks.compute(total, stage="Morse: the maxima, counted")
+    low_high = graph(_measures.range_of,
+                     *[graph(operator.itemgetter(4), summaries[i]) for i in order])
+    *tables, total, low_high, buckets = hooks.persist(
+        *graph.delayed([*tables, total, low_high, graph(list, buckets)]),
+        stage="Morse: steepest ascent, maxima ids, exits")
+    n_maxima, low_high = hooks.compute(total, low_high, stage="Morse: the maxima, counted")
     if not n_maxima:
         raise ValueError("`mask` selects no vertex")
     grid_of_tables = np.empty(shape, dtype=object)
     for index, table in zip(order, tables, strict=True):
         grid_of_tables[index] = da.from_delayed(table, shape=(1, 1, 1), dtype=object)
     return (da.block(grid_of_tables.tolist()),
-            _Maxima(int(n_maxima), np.int32 if n_maxima < 2**31 - 1 else np.int64, buckets))
+            _Maxima(int(n_maxima), np.int32 if n_maxima < 2**31 - 1 else np.int64, buckets,
+                    low_high))
 
 
 def _no_answers():
@@ -383,11 +380,6 @@ def _one_block(item):
     out = np.empty((1, 1, 1), dtype=object)
     out[0, 0, 0] = item
     return out
-
-
-def _only(block):
-    """The one element of a 1x1x1 object block (`_per_block`'s result)."""
-    return block.flat[0]
 
 
 def _maxima_of(summary):
@@ -437,7 +429,7 @@ def _group_tree_of(forests) -> list:
     groups, decided = [], []
     for group_id, (lo, _, axis, low, high) in enumerate(_group_tree.block_tree(forests.numblocks)):
         if axis is None:
-            node = graph(_group_tree.leaf, graph(_only, (forests.name, *lo)), group_id)
+            node = graph(_group_tree.leaf, graph(only, (forests.name, *lo)), group_id)
         else:
             node = graph(_group_tree.merged, groups[low], groups[high], axis, group_id)
         groups.append(graph.item(node, 1))

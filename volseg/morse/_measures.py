@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import _prune
+from ._block_objects import per_block
 
 __all__ = ["MEASURES", "STEPS", "check_measure", "cell_measures", "lazy_cell_measures"]
 
@@ -71,50 +72,56 @@ def cell_measures(hierarchy, measure: str) -> np.ndarray:
     return _scaled(sums, weight, unit)
 
 
-def lazy_cell_measures(cells, field, n_max: int, weight, events, measures,
-                       compute, place=None) -> dict:
+def lazy_cell_measures(cells, field, n_max: int, weight, events, measures, compute,
+                       place=None, low_high=None, keep=None) -> dict:
     """`cell_measures` of lazy cells, {measure: Delayed (M,)} for each of `measures`,
-    every step on the workers: the cells' saddles (hypervolume), each block's sums, and
-    their total (one task: it receives about 12 bytes per cell of each block, the
-    client nothing). For the hypervolume, the field's range is computed first, by
-    ``compute(delayed) -> value``: a pass of its own, as in the graph of the sums
-    every block would wait in memory for the last one's range. `events`: a Delayed of
-    anything with the hierarchy's ``source``, ``target`` and ``saddle_value`` (a
-    `MorseHierarchy`, or `_Events`); `weight`: None or a number. ``place(delayed) ->
-    delayed``, if given, computes the one task that reads the whole `events` (the
-    cells' saddles) where they are, and keeps it there."""
+    every step on the workers: the cells' saddles (hypervolume), each block's sums (one
+    task per block reading its cells and, for the hypervolume, its field: Dask fuses
+    the reads into it), and their total (one task: it receives about 12 bytes per cell
+    of each block, the client nothing). `events`: a Delayed of anything with the
+    hierarchy's ``source``, ``target`` and ``saddle_value`` (a `MorseHierarchy`, or
+    `_Events`); `weight`: None or a number.
+
+    `low_high`: the field's (min, max) over the cells, when known (the blockwise
+    build's ascent has it); else, for the hypervolume, it is computed first by
+    ``compute(array) -> value``: a pass of its own, as in the graph of the sums every
+    block would wait in memory for the last one's range. ``place(delayed) -> delayed``,
+    if given, computes the one task that reads the whole `events` (the cells' saddles)
+    where they are, and keeps it there; ``keep(*arrays) -> arrays``, if given, computes
+    the blocks' sums (Dask arrays) and keeps them where they are, so that the totals'
+    graph holds the totals alone (and a cluster may run them where the hierarchy is)."""
+    if "hypervolume" in measures and low_high is None:
+        ranges = compute(per_block(_block_range, cells, field.rechunk(cells.chunks)))
+        low_high = range_of(*ranges.ravel())
+    parts, units = {}, {}
+    for m in measures:
+        parts[m], units[m] = _lazy_block_sums(cells, field, n_max, events,
+                                              low_high if m == "hypervolume" else None, place)
+    if keep is not None and parts:
+        parts = dict(zip(parts, keep(*parts.values()), strict=True))
+    return {m: _total(n_max, weight, units[m], parts[m]) for m in measures}
+
+
+def _lazy_block_sums(cells, field, n_max, events, low_high, place) -> tuple:
+    """(each block's sums as a Dask object array of the block grid, their unit) of one
+    measure: the hypervolume with the field's `low_high`, the size (cells alone)
+    without."""
     import dask
 
-    low_high = None
-    if "hypervolume" in measures:
-        low_high = compute(dask.delayed(_range_of)(*[dask.delayed(_block_range)(c, f)
-                                                     for c, f in _blocks(cells, field)]))
-    return {m: _lazy_sums(cells, field, n_max, weight, events,
-                          low_high if m == "hypervolume" else None, place)
-            for m in measures}
+    if low_high is None:
+        return per_block(_block_sizes, cells, n_max=n_max), 1.0
+    unit = _unit(*low_high)
+    saddles = dask.delayed(_cell_saddles)(events, n_max, low_high[0])
+    if place is not None:
+        saddles = place(saddles)
+    return per_block(_block_hypervolumes, cells, field.rechunk(cells.chunks), n_max=n_max,
+                     saddles=saddles, unit=unit), unit
 
 
-def _lazy_sums(cells, field, n_max, weight, events, low_high, place):
-    """One measure's Delayed sums: the hypervolume with the field's `low_high`, the
-    size without."""
+def _total(n_max, weight, unit, parts):
     import dask
 
-    hypervolume = low_high is not None
-    saddles, unit = np.zeros(0), 1.0
-    if hypervolume:
-        unit = _unit(*low_high)
-        saddles = dask.delayed(_cell_saddles)(events, n_max, low_high[0])
-        if place is not None:
-            saddles = place(saddles)
-    parts = [dask.delayed(_block_sums)(c, f, saddles, unit, hypervolume)
-             for c, f in _blocks(cells, field)]
-    return dask.delayed(_summed)(n_max, weight, unit, *parts)
-
-
-def _blocks(cells, field) -> list:
-    """(cells, field) Delayed of each block of the lazy cells."""
-    field = field.rechunk(cells.chunks)
-    return list(zip(cells.to_delayed().ravel(), field.to_delayed().ravel(), strict=True))
+    return dask.delayed(_summed, pure=True)(n_max, weight, unit, parts)
 
 
 @dataclass(frozen=True)
@@ -135,23 +142,38 @@ def _scaled(sums, weight, unit) -> np.ndarray:
     return sums.astype(np.float64) * ((1.0 if weight is None else float(weight)) * unit)
 
 
-def _block_sums(cells, field, saddles, unit, hypervolume):
-    """(cell ids present, their int64 sums) of one block of lazy cells."""
-    return _prune.block_sums(cells.ravel(), field.ravel(), saddles, unit, hypervolume)
+def _block_sizes(cells, block_id, n_max):
+    """(cell ids present, their int64 vertex counts) of one block of lazy cells."""
+    return _ids_fitted(_prune.block_sums(cells.ravel(), np.zeros(0), np.zeros(0), 1.0,
+                                         False), n_max)
 
 
-def _summed(n_max, weight, unit, *parts) -> np.ndarray:
+def _block_hypervolumes(cells, field, block_id, n_max, saddles, unit):
+    """(cell ids present, their int64 hypervolume sums) of one block of lazy cells."""
+    return _ids_fitted(_prune.block_sums(cells.ravel(), field.ravel(), saddles, unit, True),
+                       n_max)
+
+
+def _ids_fitted(ids_sums, n_max) -> tuple:
+    """A block's sums with int32 cell ids where every id fits (12 bytes per cell sent
+    to the total, not 16)."""
+    ids, sums = ids_sums
+    return (ids.astype(np.int32) if n_max < 2**31 else ids), sums
+
+
+def _summed(n_max, weight, unit, parts) -> np.ndarray:
+    """The (M,) measure from the blocks' sums (an object array of them)."""
     sums = np.zeros(n_max, dtype=np.int64)
-    for ids, part in parts:
+    for ids, part in parts.flat:
         sums[ids] += part                                   # a block's ids are distinct
     return _scaled(sums, weight, unit)
 
 
-def _block_range(cells, field):
+def _block_range(cells, field, block_id):
     return _prune.masked_range(cells.ravel(), field.ravel())
 
 
-def _range_of(*parts) -> tuple:
+def range_of(*parts) -> tuple:
     """(min, max) of the field over the vertices that took part, from the blocks'."""
     return float(min(p[0] for p in parts)), float(max(p[1] for p in parts))
 

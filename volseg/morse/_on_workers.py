@@ -31,6 +31,7 @@ class HierarchyOnWorkers:
     `cells` the lazy cells. `run` cuts it where it is; reading anything else of
     `MorseHierarchy` (``maxima``, ``segment``, ...) fetches it whole to the client,
     once (`fetch`), so the handle is a `MorseHierarchy` to a caller that needs one.
+    `field_range`: the field's (min, max) in the mask, as the ascent found it.
     """
 
     core: object
@@ -43,6 +44,7 @@ class HierarchyOnWorkers:
     timings: dict
     hooks: BlockHooks
     vertex_weight: object = None
+    field_range: tuple | None = None
     _fetched: MorseHierarchy | None = None
 
     def fetch(self) -> MorseHierarchy:
@@ -76,15 +78,17 @@ class HierarchyOnWorkers:
 
         masked = self.mask is not None
         persist = self.hooks.persist
-        bases = lazy_cell_measures(
+        # The blocks' sums first, on any worker; their totals, per maximum, then go in
+        # the cut's graph, where the hierarchy is (every task of that graph goes there).
+        totals = lazy_cell_measures(
             self.cells, self._field, self.n_maxima, self.vertex_weight, self.core, measures,
             lambda d: self.hooks.compute(d, stage="Morse: the field's range")[0],
             place=lambda d: persist(d, stage="Morse: the cells' saddles, where the hierarchy "
-                                    "is", hierarchy=True)[0])
-        # The sums first, on any worker: every task in the cut's graph goes where it does.
-        sums = persist(*bases.values(), stage="Morse: the cells' measures") if bases else ()
+                                    "is", hierarchy=True)[0],
+            low_high=self.field_range,
+            keep=lambda *parts: persist(*parts, stage="Morse: the cells' measures"))
         task = dask.delayed(_run, pure=True)(self.core, self.vertex_weight, masked, function,
-                                             args, tuple(bases), *sums)
+                                             args, tuple(totals), *totals.values())
         task, = persist(task, stage="Morse: the cut, where the hierarchy is", hierarchy=True)
         result, = self.hooks.compute(task[1], stage="Morse: the cut's result")
         return relabelled(self.cells, task[0], np.int32), result
