@@ -199,6 +199,10 @@ def test_a_cut_on_the_workers_sends_the_client_nothing_per_maximum(measure):
     labels, report = cut_of(lazy, cut)
     n_maxima = lazy.n_maxima
     assert n_maxima > 1000 and lazy._fetched is None        # nothing fetched
+    # Nor does a block's labelling read the cut's table of every maximum: each reads
+    # its own cells' share of it (`_block_cells.gathered`).
+    from dask.utils import key_split
+    assert {key_split(k) for k in labels.__dask_graph__()}.isdisjoint({"run", "getitem"})
     # Beside the curve (thinned: test_preview), nothing as long as a fraction of them.
     arrays = [a for a in _arrays(received) if len(a) != len(report.curve)]
     assert max(len(a) for a in arrays) < n_maxima / 4, [a.shape for a in arrays]

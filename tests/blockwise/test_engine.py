@@ -235,10 +235,11 @@ def test_a_cluster_that_cannot_go_on_stops_with_one_line(monkeypatch):
 @pytest.mark.slow
 def test_the_hierarchy_is_joined_and_cut_on_the_worker_given_for_it():
     """With a worker of `HIERARCHY_RESOURCE` (`--hierarchy-memory`), the tasks that
-    hold arrays of every maximum (the join of the events, the cells' saddles, their
-    measures' totals, the cut) run there and the hierarchy and the cut stay there;
-    the labels are those of the cut in memory."""
+    read arrays of every maximum (the join of the events, the cells' saddles, their
+    measures' totals, the cut, each block's share of the saddles and regions) run there
+    and the hierarchy stays there; the labels are those of the cut in memory."""
     import dask.array as da
+    from dask.utils import key_split
 
     from volseg._block_hooks import BlockHooks
     from volseg.cuts import cut_of
@@ -262,15 +263,19 @@ def test_the_hierarchy_is_joined_and_cut_on_the_worker_given_for_it():
         # nothing else there (the blocks' sums, each reading a block, go anywhere).
         # (Asked before the labels: a later graph naming a finished task drops its
         # restriction.)
-        restricted = engine.client.run_on_scheduler(lambda dask_scheduler: sorted(
-            (str(k).split("-")[0], t.resource_restrictions)
-            for k, t in dask_scheduler.tasks.items() if t.resource_restrictions))
-        assert restricted == [(name, {engine_module.HIERARCHY_RESOURCE: 1})
-                              for name in ("_cell_saddles", "_core", "_run", "_summed")], \
-            restricted
+        restricted = engine.client.run_on_scheduler(lambda dask_scheduler: [
+            (key_split(k), t.resource_restrictions)
+            for k, t in dask_scheduler.tasks.items() if t.resource_restrictions])
+        # (getitem: the cut's table taken from its result, for the gathers)
+        assert {name for name, _ in restricted} == {"cell_saddles", "core", "run",
+                                                    "summed", "gather", "getitem"}, restricted
+        assert all(r == {engine_module.HIERARCHY_RESOURCE: 1} for _, r in restricted)
+        # The saddles' and the regions' share of each block, nothing else per block
+        assert [name for name, _ in restricted].count("gather") == 2 * 3 ** 3
         labels = np.asarray(labels.compute())
-        held = {str(k).split("-")[0]: v for k, v in engine.client.who_has().items()
-                if str(k).startswith(("_core-", "_run-"))}
-        assert set(held) == {"_core", "_run"} and all(set(v) == big for v in held.values()), held
+        # The hierarchy stays there; the cut's result, once its table is gathered for
+        # each block, is let go.
+        held = {key_split(k): v for k, v in engine.client.who_has().items() if v}
+        assert set(held["core"]) == big and "run" not in held, held
     expected, expected_report = cut_of(descending_complex(field), cut)
     assert np.array_equal(labels, expected) and report.n_regions == expected_report.n_regions

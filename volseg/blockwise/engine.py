@@ -302,9 +302,10 @@ class Engine:
                 return dask.compute(*collections)
 
     def persist(self, *collections, stage: str = "computing", hierarchy: bool = False):
-        """`dask.persist(*collections)` (Delayed): computed now, with the progress of
-        `compute`, and kept where each was computed (on a cluster, in its workers'
-        memory: the client receives none of it) for later graphs to read.
+        """`dask.persist(*collections)` (Delayed, Dask arrays): computed now, with the
+        progress of `compute`, and kept where each was computed (on a cluster, in its
+        workers' memory, an array's blocks each where it was made: the client receives
+        none of it) for later graphs to read.
 
         `hierarchy`: they hold a whole hierarchy. On a cluster with a worker of
         `HIERARCHY_RESOURCE`, every task of their graphs runs on it (persist their
@@ -315,8 +316,7 @@ class Engine:
             if self.progress:
                 print(f"  {stage}", file=sys.stderr, flush=True)
             return dask.persist(*collections)
-        futures = self._watched(collections, stage, gather=False, hierarchy=hierarchy)
-        return tuple(dask.delayed(future) for future in futures)
+        return tuple(self._watched(collections, stage, gather=False, hierarchy=hierarchy))
 
     def _watched(self, collections, stage: str, gather: bool = True, hierarchy: bool = False):
         """The distributed compute of `compute`, stopped with one line when the
@@ -325,13 +325,17 @@ class Engine:
         with work pending (distributed waits forever then)."""
         from concurrent.futures import CancelledError
 
-        from distributed import KilledWorker, progress
+        from distributed import KilledWorker, futures_of, progress
 
         start, sent = time.perf_counter(), self._sent()
         # A worker restriction given to the compute, not a `dask.annotate`: annotations
         # leak into a task's dependencies passed in containers (dask 2026.8).
         resources = {HIERARCHY_RESOURCE: 1} if hierarchy and self._hierarchy_worker else None
-        futures = self.client.compute(list(collections), resources=resources)
+        if gather:
+            futures = self.client.compute(list(collections), resources=resources)
+        else:      # persisted: an array keeps its blocks where each was computed
+            persisted = self.client.persist(list(collections), resources=resources)
+            futures = futures_of(persisted)
         watchdog = _Watchdog(self.client, futures, STALL_SECONDS)
         try:
             with watchdog:
@@ -348,7 +352,7 @@ class Engine:
                     for future in futures:     # raise a task's error here, as gather would
                         if future.status == "error":
                             future.result()
-                    results = futures
+                    results = persisted
                 self._record(stage, start, sent, results if gather else ())
                 return results
         except KilledWorker:

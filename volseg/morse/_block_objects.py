@@ -10,10 +10,11 @@ __all__ = []
 
 
 def per_block(function, *arrays, **kwargs):
-    """Run `function(*blocks, block_id=..., **kwargs)` on every block of `arrays` (same
-    chunks) and return its results, one object per block, as an (object) array of the
-    block grid, through `map_blocks`. `kwargs` may hold Delayed objects (one shared
-    task each)."""
+    """Run `function(*blocks, block_id=..., **kwargs)` on every block of `arrays` (the
+    same block grid, matched by block index: an array of this function's results
+    passes its objects) and return its results, one object per block, as an (object)
+    array of the block grid, through `map_blocks`. `kwargs` may hold Delayed objects
+    (one shared task each)."""
     import dask.array as da
 
     def wrapped(*blocks, block_id=None, **given):

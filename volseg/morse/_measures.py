@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import _prune
+from ._block_cells import block_cells, gathered, ids_of
 from ._block_objects import per_block
 
 __all__ = ["MEASURES", "STEPS", "check_measure", "cell_measures", "lazy_cell_measures"]
@@ -72,56 +73,66 @@ def cell_measures(hierarchy, measure: str) -> np.ndarray:
     return _scaled(sums, weight, unit)
 
 
-def lazy_cell_measures(cells, field, n_max: int, weight, events, measures, compute,
-                       place=None, low_high=None, keep=None) -> dict:
+def lazy_cell_measures(cells, field, n_max: int, weight, events, measures, compute, *,
+                       blocks=None, ids=None, low_high=None, place=None,
+                       keep=None) -> dict:
     """`cell_measures` of lazy cells, {measure: Delayed (M,)} for each of `measures`,
-    every step on the workers: the cells' saddles (hypervolume), each block's sums (one
-    task per block reading its cells and, for the hypervolume, its field: Dask fuses
-    the reads into it), and their total (one task: it receives about 12 bytes per cell
-    of each block, the client nothing). `events`: a Delayed of anything with the
-    hierarchy's ``source``, ``target`` and ``saddle_value`` (a `MorseHierarchy`, or
-    `_Events`); `weight`: None or a number.
+    every step on the workers and no array of every maximum sent to a block's task
+    (`_block_cells`): each block's cells and their counts (the size), the cells'
+    saddles (one task, where `events` are) gathered for each block's cells, each
+    block's hypervolume sums (one task per block reading its cells and its field: Dask
+    fuses the reads into it), and each measure's total (one task: it receives about 12
+    bytes per cell of each block, the client nothing). `events`: a Delayed of anything
+    with the hierarchy's ``source``, ``target`` and ``saddle_value`` (a
+    `MorseHierarchy`, or `_Events`); `weight`: None or a number.
 
-    `low_high`: the field's (min, max) over the cells, when known (the blockwise
-    build's ascent has it); else, for the hypervolume, it is computed first by
-    ``compute(array) -> value``: a pass of its own, as in the graph of the sums every
-    block would wait in memory for the last one's range. ``place(delayed) -> delayed``,
-    if given, computes the one task that reads the whole `events` (the cells' saddles)
-    where they are, and keeps it there; ``keep(*arrays) -> arrays``, if given, computes
-    the blocks' sums (Dask arrays) and keeps them where they are, so that the totals'
-    graph holds the totals alone (and a cluster may run them where the hierarchy is)."""
-    if "hypervolume" in measures and low_high is None:
-        ranges = compute(per_block(_block_range, cells, field.rechunk(cells.chunks)))
-        low_high = range_of(*ranges.ravel())
-    parts, units = {}, {}
-    for m in measures:
-        parts[m], units[m] = _lazy_block_sums(cells, field, n_max, events,
-                                              low_high if m == "hypervolume" else None, place)
-    if keep is not None and parts:
-        parts = dict(zip(parts, keep(*parts.values()), strict=True))
-    return {m: _total(n_max, weight, units[m], parts[m]) for m in measures}
-
-
-def _lazy_block_sums(cells, field, n_max, events, low_high, place) -> tuple:
-    """(each block's sums as a Dask object array of the block grid, their unit) of one
-    measure: the hypervolume with the field's `low_high`, the size (cells alone)
-    without."""
+    `blocks`, `ids`: `_block_cells.block_cells(cells)` and its `ids_of`, if made
+    already (a cut's labels read them too). `low_high`: the field's (min, max) over
+    the cells, when known (the blockwise build's ascent has it); else, for the
+    hypervolume, it is computed first by ``compute(array) -> value``: a pass of its
+    own, as in the graph of the sums every block would wait in memory for the last
+    one's range. ``place(*lazy) -> lazy``
+    computes the tasks that read a whole per-maximum array where that array is, and
+    keeps them there; ``keep(*lazy) -> lazy`` computes per-block tasks and keeps them
+    where they are, so that the next graph holds the next step alone. Neither given:
+    one lazy graph."""
     import dask
 
-    if low_high is None:
-        return per_block(_block_sizes, cells, n_max=n_max), 1.0
-    unit = _unit(*low_high)
-    saddles = dask.delayed(_cell_saddles)(events, n_max, low_high[0])
-    if place is not None:
-        saddles = place(saddles)
-    return per_block(_block_hypervolumes, cells, field.rechunk(cells.chunks), n_max=n_max,
-                     saddles=saddles, unit=unit), unit
+    def unchanged(*lazy):
+        return lazy
+
+    place, keep = place or unchanged, keep or unchanged
+    if blocks is None:
+        blocks, = keep(block_cells(cells))
+    if ids is None and "hypervolume" in measures:
+        ids, = keep(ids_of(blocks))
+    out = {}
+    if "size" in measures:
+        out["size"] = _total(n_max, weight, 1.0, blocks)
+    if "hypervolume" in measures:
+        if low_high is None:
+            ranges = compute(per_block(_block_range, cells, field.rechunk(cells.chunks)))
+            low_high = range_of(*ranges.ravel())
+        unit = _unit(*low_high)
+        saddles = dask.delayed(_cell_saddles)(events, n_max, low_high[0])
+        saddles, = place(gathered(ids, saddles))
+        sums, = keep(per_block(_block_hypervolumes, cells, field.rechunk(cells.chunks), ids,
+                               saddles, unit=unit))
+        out["hypervolume"] = _total(n_max, weight, unit, ids, sums)
+    return out
 
 
-def _total(n_max, weight, unit, parts):
+def _total(n_max, weight, unit, ids, sums=None):
+    """Delayed (M,) of a measure from each block's `ids` and `sums` (or its counts, the
+    second item of `ids`' blocks, without `sums`)."""
     import dask
 
-    return dask.delayed(_summed, pure=True)(n_max, weight, unit, parts)
+    # Each block as a Delayed of the graph as it is: an optimized graph (or an array
+    # passed whole to `delayed`) names persisted blocks by key and drops their futures,
+    # so the blocks could be released before this task runs.
+    ids = list(ids.to_delayed(optimize_graph=False).ravel())
+    sums = [] if sums is None else list(sums.to_delayed(optimize_graph=False).ravel())
+    return dask.delayed(_summed, pure=True)(n_max, weight, unit, len(ids), *ids, *sums)
 
 
 @dataclass(frozen=True)
@@ -142,31 +153,25 @@ def _scaled(sums, weight, unit) -> np.ndarray:
     return sums.astype(np.float64) * ((1.0 if weight is None else float(weight)) * unit)
 
 
-def _block_sizes(cells, block_id, n_max):
-    """(cell ids present, their int64 vertex counts) of one block of lazy cells."""
-    return _ids_fitted(_prune.block_sums(cells.ravel(), np.zeros(0), np.zeros(0), 1.0,
-                                         False), n_max)
+def _block_hypervolumes(cells, field, ids, saddles, block_id, unit):
+    """The int64 hypervolume sums of one block's cells (aligned with its `ids`), from
+    its share of the cells' `saddles`."""
+    ids, saddles = ids.flat[0], saddles.flat[0]
+    out = np.zeros(len(ids), dtype=np.int64)
+    _prune.block_hypervolumes(cells.ravel(), field.ravel(), ids, saddles, unit, out)
+    return out
 
 
-def _block_hypervolumes(cells, field, block_id, n_max, saddles, unit):
-    """(cell ids present, their int64 hypervolume sums) of one block of lazy cells."""
-    return _ids_fitted(_prune.block_sums(cells.ravel(), field.ravel(), saddles, unit, True),
-                       n_max)
-
-
-def _ids_fitted(ids_sums, n_max) -> tuple:
-    """A block's sums with int32 cell ids where every id fits (12 bytes per cell sent
-    to the total, not 16)."""
-    ids, sums = ids_sums
-    return (ids.astype(np.int32) if n_max < 2**31 else ids), sums
-
-
-def _summed(n_max, weight, unit, parts) -> np.ndarray:
-    """The (M,) measure from the blocks' sums (an object array of them)."""
-    sums = np.zeros(n_max, dtype=np.int64)
-    for ids, part in parts.flat:
-        sums[ids] += part                                   # a block's ids are distinct
-    return _scaled(sums, weight, unit)
+def _summed(n_max, weight, unit, n_blocks, *parts) -> np.ndarray:
+    """The (M,) measure from the blocks' ids and then their sums (1x1x1 object blocks;
+    without sums, the counts beside the ids)."""
+    total = np.zeros(n_max, dtype=np.int64)
+    ids, sums = parts[:n_blocks], parts[n_blocks:]
+    for i, block in enumerate(ids):
+        block = block.flat[0]
+        cells, part = (block[0], block[1]) if not sums else (block, sums[i].flat[0])
+        total[cells] += part                                # a block's ids are distinct
+    return _scaled(total, weight, unit)
 
 
 def _block_range(cells, field, block_id):

@@ -3,9 +3,10 @@
 The per-maximum arrays (maxima, values, events: about 64 bytes per maximum) stay in
 the task that joined them (on a cluster, in one worker's memory), and a cut runs in a
 task beside them (`run`): the cells' measures summed on the workers, the pruning, the
-region of every maximum and its relabelling table made there, the table sent from
-worker to worker to the blocks that relabel, and only the cut's small result (O(regions)
-and a thinned curve) sent to the client (issue 30). The same functions run in memory
+region of every maximum and its relabelling table made there, each block sent its own
+cells' share of it (`_block_cells`: no block worker receives an array of every maximum),
+and only the cut's small result (O(regions) and a thinned curve) sent to the client
+(issue 30). The same functions run in memory
 on a `MorseHierarchy`: one cut, written once.
 """
 
@@ -17,7 +18,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._block_hooks import BlockHooks
-from ._hierarchy import MorseHierarchy, checked_weight, region_table, relabelled
+from ._block_cells import block_cells, gathered, ids_of, looked_up
+from ._hierarchy import MorseHierarchy, checked_weight, region_table
 from ._measures import lazy_cell_measures
 
 __all__ = ["HierarchyOnWorkers"]
@@ -46,6 +48,7 @@ class HierarchyOnWorkers:
     vertex_weight: object = None
     field_range: tuple | None = None
     _fetched: MorseHierarchy | None = None
+    _blocks: tuple | None = None
 
     def fetch(self) -> MorseHierarchy:
         """The whole hierarchy on the client (computed once)."""
@@ -58,7 +61,7 @@ class HierarchyOnWorkers:
         return self._fetched
 
     def __getattr__(self, name):
-        if name.startswith("__") or name == "_fetched":   # copy and pickle look for these
+        if name.startswith("__") or name in ("_fetched", "_blocks"):   # copy, pickle
             raise AttributeError(name)
         return getattr(self.fetch(), name)
 
@@ -71,27 +74,41 @@ class HierarchyOnWorkers:
         """(lazy labels, result) of ``function(hierarchy, masked, *args) -> (region,
         result)`` run in one task where the hierarchy is: `region` (the region of each
         maximum, as `MorseHierarchy.region_of_maximum` gives) becomes the labels'
-        table there and stays on the workers; `result` (small) comes to the client.
-        The hierarchy is given the cells' `measures` first (`with_cell_measures`,
-        summed on the workers), so that it reads no cell."""
+        table there and stays on the workers, each block given its own cells' share of
+        it (`_block_cells`); `result` (small) comes to the client. The hierarchy is
+        given the cells' `measures` first (`with_cell_measures`, summed on the
+        workers), so that it reads no cell."""
         import dask
 
         masked = self.mask is not None
         persist = self.hooks.persist
-        # The blocks' sums first, on any worker; their totals, per maximum, then go in
-        # the cut's graph, where the hierarchy is (every task of that graph goes there).
+        blocks, ids = self._block_cells()
         totals = lazy_cell_measures(
             self.cells, self._field, self.n_maxima, self.vertex_weight, self.core, measures,
             lambda d: self.hooks.compute(d, stage="Morse: the field's range")[0],
-            place=lambda d: persist(d, stage="Morse: the cells' saddles, where the hierarchy "
-                                    "is", hierarchy=True)[0],
-            low_high=self.field_range,
-            keep=lambda *parts: persist(*parts, stage="Morse: the cells' measures"))
+            blocks=blocks, ids=ids, low_high=self.field_range,
+            place=lambda *lazy: persist(*lazy, stage="Morse: the cells' saddles, where "
+                                        "the hierarchy is", hierarchy=True),
+            keep=lambda *lazy: persist(*lazy, stage="Morse: the cells' measures"))
+        # The totals (per maximum) go in the cut's graph, where the hierarchy is (every
+        # task of that graph goes there).
         task = dask.delayed(_run, pure=True)(self.core, self.vertex_weight, masked, function,
                                              args, tuple(totals), *totals.values())
         task, = persist(task, stage="Morse: the cut, where the hierarchy is", hierarchy=True)
+        regions, = persist(gathered(ids, task[0]), stage="Morse: each block's regions, where "
+                           "the hierarchy is", hierarchy=True)
         result, = self.hooks.compute(task[1], stage="Morse: the cut's result")
-        return relabelled(self.cells, task[0], np.int32), result
+        return looked_up(self.cells, ids, regions, np.int32), result
+
+    def _block_cells(self) -> tuple:
+        """(each block's cells and counts, each block's ids): `_block_cells`, made
+        once and kept on the workers."""
+        if self._blocks is None:
+            blocks, = self.hooks.persist(block_cells(self.cells),
+                                         stage="Morse: each block's cells")
+            ids, = self.hooks.persist(ids_of(blocks), stage="Morse: each block's cells' ids")
+            self._blocks = blocks, ids
+        return self._blocks
 
 
 def _run(core, weight, masked, function, args, names, *sums) -> tuple:

@@ -211,7 +211,12 @@ def _term(cells, field, saddles, unit, hypervolume, i):
     above s = its cell's highest saddle, else 0 (hypervolume)."""
     if not hypervolume:
         return np.int64(1)
-    above = field[i] - saddles[cells[i]]
+    return _above(field[i] - saddles[cells[i]], unit)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _above(above, unit):
+    """A hypervolume term: floor(above / unit) for a vertex above its cell's saddle."""
     return np.int64(np.floor(above / unit)) if above > 0 else np.int64(0)
 
 
@@ -272,6 +277,21 @@ def block_sums(cells, field, saddles, unit, hypervolume):
         sums[slot] += _term(cells, field, saddles, unit, hypervolume, i)
     taken = keys >= 0
     return keys[taken], sums[taken]
+
+
+@numba.njit(cache=True, nogil=True)
+def block_hypervolumes(cells, field, ids, saddles, unit, out):
+    """out[j] += the hypervolume terms of the block's vertices in cell ids[j] (sorted),
+    `saddles` aligned with `ids` (the block's share of the cells' saddles); a run of
+    one cell along the fastest axis is one search."""
+    last, at = -1, 0
+    for i in range(len(cells)):
+        c = cells[i]
+        if c < 0:
+            continue
+        if c != last:
+            at, last = np.searchsorted(ids, c), c
+        out[at] += _above(field[i] - saddles[at], unit)
 
 
 @numba.njit(cache=True, nogil=True)
