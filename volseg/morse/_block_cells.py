@@ -5,8 +5,8 @@ hypervolume) and the regions of the cut (for the labels). Sent whole to every wo
 that sums or labels a block, each would cost every such worker 4-8 bytes per maximum
 of the volume (35 GB at 4096^3). Instead (issue 30):
 
-- `block_cells`: each block's distinct cells (sorted ids) and their vertex counts, one
-  task per block, kept on the workers;
+- `block_cells`: each block's distinct cells (sorted ids), one task per block, kept
+  on the workers;
 - `gathered`: a per-maximum array's entries for each block's cells, one task per block
   where the array is (the hierarchy's worker): it receives the block's ids and sends
   back as many values;
@@ -28,26 +28,14 @@ __all__ = []
 
 
 def block_cells(cells):
-    """Lazy (object array of the block grid): each block's (sorted distinct cell ids,
-    their vertex counts as int32), cells < 0 (outside the mask) left out."""
+    """Lazy (object array of the block grid): each block's sorted distinct cell ids,
+    cells < 0 (outside the mask) left out."""
     return per_block(_cells_of_block, cells)
 
 
 def _cells_of_block(cells, block_id):
-    ids, counts = _prune.block_sums(cells.ravel(), np.zeros(0), np.zeros(0), 1.0, False)
-    order = np.argsort(ids)
-    return ids[order].astype(cells.dtype), counts[order].astype(np.int32)
-
-
-def ids_of(blocks):
-    """Lazy: each block's ids alone (what a `gathered` task receives)."""
-    return blocks.map_blocks(_first, dtype=object, meta=np.empty((0,) * blocks.ndim, object))
-
-
-def _first(block):
-    out = np.empty(block.shape, dtype=object)
-    out.flat[0] = block.flat[0][0]
-    return out
+    ids, _ = _prune.block_sums(cells.ravel(), np.zeros(0), np.zeros(0), 1.0, False)
+    return np.sort(ids).astype(cells.dtype)
 
 
 def gathered(ids, array):

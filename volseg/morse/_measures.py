@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import _prune
-from ._block_cells import block_cells, gathered, ids_of
+from ._block_cells import block_cells, gathered
 from ._block_objects import per_block
 
 __all__ = ["MEASURES", "STEPS", "check_measure", "cell_measures", "lazy_cell_measures"]
@@ -74,11 +74,10 @@ def cell_measures(hierarchy, measure: str) -> np.ndarray:
 
 
 def lazy_cell_measures(cells, field, n_max: int, weight, events, measures, compute, *,
-                       blocks=None, ids=None, low_high=None, place=None,
-                       keep=None) -> dict:
+                       ids=None, low_high=None, place=None, keep=None) -> dict:
     """`cell_measures` of lazy cells, {measure: Delayed (M,)} for each of `measures`,
     every step on the workers and no array of every maximum sent to a block's task
-    (`_block_cells`): each block's cells and their counts (the size), the cells'
+    (`_block_cells`): each block's distinct cells, their counts (the size), the cells'
     saddles (one task, where `events` are) gathered for each block's cells, each
     block's hypervolume sums (one task per block reading its cells and its field: Dask
     fuses the reads into it), and each measure's total (one task: it receives about 12
@@ -86,12 +85,11 @@ def lazy_cell_measures(cells, field, n_max: int, weight, events, measures, compu
     with the hierarchy's ``source``, ``target`` and ``saddle_value`` (a
     `MorseHierarchy`, or `_Events`); `weight`: None or a number.
 
-    `blocks`, `ids`: `_block_cells.block_cells(cells)` and its `ids_of`, if made
-    already (a cut's labels read them too). `low_high`: the field's (min, max) over
-    the cells, when known (the blockwise build's ascent has it); else, for the
-    hypervolume, it is computed first by ``compute(array) -> value``: a pass of its
-    own, as in the graph of the sums every block would wait in memory for the last
-    one's range. ``place(*lazy) -> lazy``
+    `ids`: `_block_cells.block_cells(cells)`, if made already (a cut's labels read
+    them too). `low_high`: the field's (min, max) over the cells, when known (the
+    blockwise build's ascent has it); else, for the hypervolume, it is computed first
+    by ``compute(array) -> value``: a pass of its own, as in the graph of the sums every
+    block would wait in memory for the last one's range. ``place(*lazy) -> lazy``
     computes the tasks that read a whole per-maximum array where that array is, and
     keeps them there; ``keep(*lazy) -> lazy`` computes per-block tasks and keeps them
     where they are, so that the next graph holds the next step alone. Neither given:
@@ -102,13 +100,12 @@ def lazy_cell_measures(cells, field, n_max: int, weight, events, measures, compu
         return lazy
 
     place, keep = place or unchanged, keep or unchanged
-    if blocks is None:
-        blocks, = keep(block_cells(cells))
-    if ids is None and "hypervolume" in measures:
-        ids, = keep(ids_of(blocks))
+    if ids is None:
+        ids, = keep(block_cells(cells))
     out = {}
     if "size" in measures:
-        out["size"] = _total(n_max, weight, 1.0, blocks)
+        sizes, = keep(per_block(_block_sizes, cells))
+        out["size"] = _total(n_max, weight, 1.0, ids, sizes)
     if "hypervolume" in measures:
         if low_high is None:
             ranges = compute(per_block(_block_range, cells, field.rechunk(cells.chunks)))
@@ -122,16 +119,15 @@ def lazy_cell_measures(cells, field, n_max: int, weight, events, measures, compu
     return out
 
 
-def _total(n_max, weight, unit, ids, sums=None):
-    """Delayed (M,) of a measure from each block's `ids` and `sums` (or its counts, the
-    second item of `ids`' blocks, without `sums`)."""
+def _total(n_max, weight, unit, ids, sums):
+    """Delayed (M,) of a measure from each block's `ids` and `sums` (aligned)."""
     import dask
 
     # Each block as a Delayed of the graph as it is: an optimized graph (or an array
     # passed whole to `delayed`) names persisted blocks by key and drops their futures,
     # so the blocks could be released before this task runs.
     ids = list(ids.to_delayed(optimize_graph=False).ravel())
-    sums = [] if sums is None else list(sums.to_delayed(optimize_graph=False).ravel())
+    sums = list(sums.to_delayed(optimize_graph=False).ravel())
     return dask.delayed(_summed, pure=True)(n_max, weight, unit, len(ids), *ids, *sums)
 
 
@@ -163,15 +159,19 @@ def _block_hypervolumes(cells, field, ids, saddles, block_id, unit):
 
 
 def _summed(n_max, weight, unit, n_blocks, *parts) -> np.ndarray:
-    """The (M,) measure from the blocks' ids and then their sums (1x1x1 object blocks;
-    without sums, the counts beside the ids)."""
+    """The (M,) measure from the blocks' ids and then their sums (1x1x1 object
+    blocks)."""
     total = np.zeros(n_max, dtype=np.int64)
-    ids, sums = parts[:n_blocks], parts[n_blocks:]
-    for i, block in enumerate(ids):
-        block = block.flat[0]
-        cells, part = (block[0], block[1]) if not sums else (block, sums[i].flat[0])
-        total[cells] += part                                # a block's ids are distinct
+    for ids, sums in zip(parts[:n_blocks], parts[n_blocks:], strict=True):
+        total[ids.flat[0]] += sums.flat[0]                  # a block's ids are distinct
     return _scaled(total, weight, unit)
+
+
+def _block_sizes(cells, block_id):
+    """The vertex counts of one block's cells, aligned with its sorted ids
+    (`_block_cells.block_cells`)."""
+    ids, counts = _prune.block_sums(cells.ravel(), np.zeros(0), np.zeros(0), 1.0, False)
+    return counts[np.argsort(ids)]
 
 
 def _block_range(cells, field, block_id):

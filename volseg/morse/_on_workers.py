@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._block_hooks import BlockHooks
-from ._block_cells import block_cells, gathered, ids_of, looked_up
+from ._block_cells import block_cells, gathered, looked_up
 from ._hierarchy import MorseHierarchy, checked_weight, region_table
 from ._measures import lazy_cell_measures
 
@@ -48,7 +48,7 @@ class HierarchyOnWorkers:
     vertex_weight: object = None
     field_range: tuple | None = None
     _fetched: MorseHierarchy | None = None
-    _blocks: tuple | None = None
+    _blocks: object = None
 
     def fetch(self) -> MorseHierarchy:
         """The whole hierarchy on the client (computed once)."""
@@ -82,16 +82,20 @@ class HierarchyOnWorkers:
 
         masked = self.mask is not None
         persist = self.hooks.persist
-        blocks, ids = self._block_cells()
+        ids = self._block_cells()
         totals = lazy_cell_measures(
             self.cells, self._field, self.n_maxima, self.vertex_weight, self.core, measures,
             lambda d: self.hooks.compute(d, stage="Morse: the field's range")[0],
-            blocks=blocks, ids=ids, low_high=self.field_range,
+            ids=ids, low_high=self.field_range,
             place=lambda *lazy: persist(*lazy, stage="Morse: the cells' saddles, where "
                                         "the hierarchy is", hierarchy=True),
             keep=lambda *lazy: persist(*lazy, stage="Morse: the cells' measures"))
-        # The totals (per maximum) go in the cut's graph, where the hierarchy is (every
-        # task of that graph goes there).
+        # The totals (per maximum) where the hierarchy is, and the blocks' sums let go
+        # before the cut's pruning runs beside them.
+        if totals:
+            totals = dict(zip(totals, persist(*totals.values(), stage="Morse: the cells' "
+                                              "measures summed, where the hierarchy is",
+                                              hierarchy=True), strict=True))
         task = dask.delayed(_run, pure=True)(self.core, self.vertex_weight, masked, function,
                                              args, tuple(totals), *totals.values())
         task, = persist(task, stage="Morse: the cut, where the hierarchy is", hierarchy=True)
@@ -100,14 +104,12 @@ class HierarchyOnWorkers:
         result, = self.hooks.compute(task[1], stage="Morse: the cut's result")
         return looked_up(self.cells, ids, regions, np.int32), result
 
-    def _block_cells(self) -> tuple:
-        """(each block's cells and counts, each block's ids): `_block_cells`, made
-        once and kept on the workers."""
+    def _block_cells(self):
+        """Each block's distinct cells (`_block_cells.block_cells`), found once and kept
+        on the workers."""
         if self._blocks is None:
-            blocks, = self.hooks.persist(block_cells(self.cells),
-                                         stage="Morse: each block's cells")
-            ids, = self.hooks.persist(ids_of(blocks), stage="Morse: each block's cells' ids")
-            self._blocks = blocks, ids
+            self._blocks, = self.hooks.persist(block_cells(self.cells),
+                                               stage="Morse: each block's cells")
         return self._blocks
 
 
