@@ -12,8 +12,8 @@ of the volume (35 GB at 4096^3). Instead (issue 30):
   back as many values;
 - `looked_up`: a per-block array of values by cell, read through the block's ids.
 
-The traffic is a few bytes per (block, cell) pair, about 1.3 per maximum, whatever the
-workers' count.
+The traffic is a few bytes per (block, cell) pair (a cell that several blocks share
+counts once in each), whatever the workers' count.
 """
 
 from __future__ import annotations
