@@ -6,7 +6,7 @@ that sums or labels a block, each would cost every such worker 4-8 bytes per max
 of the volume (35 GB at 4096^3). Instead (issue 30):
 
 - `block_cells`: each block's distinct cells (sorted ids), one task per block, kept
-  on the workers;
+  on the workers (`block_counts`: their vertex counts, aligned);
 - `gathered`: a per-maximum array's entries for each block's cells, one task per block
   where the array is (the hierarchy's worker): it receives the block's ids and sends
   back as many values;
@@ -33,9 +33,25 @@ def block_cells(cells):
     return per_block(_cells_of_block, cells)
 
 
+def block_counts(cells):
+    """Lazy, as `block_cells`: the vertex count of each block's cells, aligned with
+    their ids (what a size measure sums)."""
+    return per_block(_counts_of_block, cells)
+
+
+def _sorted_cells(cells) -> tuple:
+    """(a block's distinct cells >= 0, sorted; their vertex counts), one hashed pass."""
+    ids, counts = _prune.block_sums(cells.ravel(), np.zeros(0), np.zeros(0), 1.0, False)
+    order = np.argsort(ids)
+    return ids[order], counts[order]
+
+
 def _cells_of_block(cells, block_id):
-    ids, _ = _prune.block_sums(cells.ravel(), np.zeros(0), np.zeros(0), 1.0, False)
-    return np.sort(ids).astype(cells.dtype)
+    return _sorted_cells(cells)[0].astype(cells.dtype)
+
+
+def _counts_of_block(cells, block_id):
+    return _sorted_cells(cells)[1]
 
 
 def gathered(ids, array):

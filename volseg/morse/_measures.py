@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import _prune
-from ._block_cells import block_cells, gathered
+from ._block_cells import block_cells, block_counts, gathered
 from ._block_objects import per_block
 
 __all__ = ["MEASURES", "STEPS", "check_measure", "cell_measures", "lazy_cell_measures"]
@@ -100,21 +100,21 @@ def lazy_cell_measures(cells, field, n_max: int, weight, events, measures, compu
         return lazy
 
     place, keep = place or unchanged, keep or unchanged
+    field = field.rechunk(cells.chunks)
     if ids is None:
         ids, = keep(block_cells(cells))
     out = {}
     if "size" in measures:
-        sizes, = keep(per_block(_block_sizes, cells))
+        sizes, = keep(block_counts(cells))
         out["size"] = _total(n_max, weight, 1.0, ids, sizes)
     if "hypervolume" in measures:
         if low_high is None:
-            ranges = compute(per_block(_block_range, cells, field.rechunk(cells.chunks)))
+            ranges = compute(per_block(_block_range, cells, field))
             low_high = range_of(*ranges.ravel())
         unit = _unit(*low_high)
         saddles = dask.delayed(_cell_saddles)(events, n_max, low_high[0])
         saddles, = place(gathered(ids, saddles))
-        sums, = keep(per_block(_block_hypervolumes, cells, field.rechunk(cells.chunks), ids,
-                               saddles, unit=unit))
+        sums, = keep(per_block(_block_hypervolumes, cells, field, ids, saddles, unit=unit))
         out["hypervolume"] = _total(n_max, weight, unit, ids, sums)
     return out
 
@@ -165,13 +165,6 @@ def _summed(n_max, weight, unit, n_blocks, *parts) -> np.ndarray:
     for ids, sums in zip(parts[:n_blocks], parts[n_blocks:], strict=True):
         total[ids.flat[0]] += sums.flat[0]                  # a block's ids are distinct
     return _scaled(total, weight, unit)
-
-
-def _block_sizes(cells, block_id):
-    """The vertex counts of one block's cells, aligned with its sorted ids
-    (`_block_cells.block_cells`)."""
-    ids, counts = _prune.block_sums(cells.ravel(), np.zeros(0), np.zeros(0), 1.0, False)
-    return counts[np.argsort(ids)]
 
 
 def _block_range(cells, field, block_id):
