@@ -8,11 +8,12 @@ gaussian-filtered noise quantized to 8 bits, computed once and saved; each revis
 then loads it in a fresh interpreter, builds the hierarchy (not timed; with
 --blockwise, of the field as a Dask array of 256^3 chunks, threads, its cells persisted
 as the pipeline stores them), and times the two parts of the first hypervolume cut:
-the cells' measures (`cell_measures`) and the pruning to the end (`prune`), best of
+the cells' measures (`cell_measures`) and the pruning to the end (`_pruning`), best of
 --repeat, one revision after the other. Memory is each part's own: the peak resident
 size above the one before it, sampled every 5 ms with psutil (the build's peak,
-higher, is not the cut's). Both revisions must give the same extinctions: the script
-checks it and fails otherwise.
+higher, is not the cut's). Both revisions must give the same extinctions (to 1e-9,
+on all but 0.1 % of the events: a revision before the fixed-point pruning summed
+floats): the script checks it and fails otherwise.
 """
 
 import argparse
@@ -30,7 +31,7 @@ print(json.dumps(dict()))
 CUT = SETUP + """
 import threading
 import psutil
-from volseg.morse import _measures, _prune
+from volseg.morse import _measures
 field = np.load({path!r})
 if {blockwise}:
     import dask, dask.array as da
@@ -52,10 +53,8 @@ def measured(run):  # (seconds, MB of peak resident size above the start, result
     start = time.perf_counter(); result = run(); seconds = time.perf_counter() - start
     stop.set(); thread.join()
     return seconds, (peak[0] - before) / 2**20, result
-def pruned(base):
-    order = np.empty(len(h.young), dtype=np.int64); extinction = np.empty(len(h.young))
-    _prune.prune(h.source, h.target, len(h.maxima), base, order, extinction)
-    return extinction
+def pruned(base):  # the hierarchy's own pruning to the end, given the cells' measures
+    return h.with_cell_measures(dict(hypervolume=base))._pruning("hypervolume")[1]
 out = dict(measures=float("inf"), prune=float("inf"), measures_mb=0.0, prune_mb=0.0)
 for _ in range({repeat}):
     seconds, mb, base = measured(lambda: _measures.cell_measures(h, "hypervolume"))
@@ -89,8 +88,11 @@ def main():
                 got[name]["extinction"] = out
             import numpy as np
 
-            same = np.array_equal(np.load(got["base"]["extinction"]),
-                                  np.load(got["now"]["extinction"]))
+            a, b = np.load(got["base"]["extinction"]), np.load(got["now"]["extinction"])
+            same = np.array_equal(a, b)
+            # Since the pruning adds fixed-point integers (issue 30) a revision before
+            # it differs where float sums rounded: a few events, by about 1e-16.
+            off = np.abs(a - b) > 1e-9 * np.maximum(np.abs(a), np.abs(b))
             old, new = got["base"], got["now"]
             print(f"{n}^3 ({new['maxima']} maxima){' blockwise' if args.blockwise else ''}: "
                   f"measures base {old['measures']:.2f} s, now {new['measures']:.2f} s "
@@ -98,8 +100,9 @@ def main():
                   f"now {new['prune']:.2f} s ({old['prune'] / new['prune']:.2f}x); peak memory "
                   f"above the hierarchy: measures base {old['measures_mb']:.0f} MB, now "
                   f"{new['measures_mb']:.0f} MB; prune base {old['prune_mb']:.0f} MB, now "
-                  f"{new['prune_mb']:.0f} MB; same extinctions: {same}", flush=True)
-            if not same:
+                  f"{new['prune_mb']:.0f} MB; same extinctions: {same} (beyond 1e-9: "
+                  f"{int(off.sum())} of {len(a)})", flush=True)
+            if off.mean() > 1e-3:
                 raise SystemExit("the revisions' extinctions differ")
 
 

@@ -11,7 +11,7 @@ from dataclasses import field as dataclass_field
 import numpy as np
 from numpy.typing import NDArray
 
-from . import _kernels, _measures, _prune
+from . import _kernels, _measures, _prune, _prune_groups
 from ._graph import grid_offsets
 from ._measures import check_measure
 
@@ -168,26 +168,44 @@ class MorseHierarchy:
 
     def _cell_base(self, measure):
         """`cell_measure` before any pruning, computed once (a blockwise cut on the
-        workers is given it: `with_cell_measures`)."""
+        workers is given it: `with_cell_measures`): `_measures.Fixed`, or float sums
+        with a mesh's vertex weights."""
         key = ("cells", measure)
         if key not in self._pruned:
             self._pruned[key] = _measures.cell_measures(self, measure)
         return self._pruned[key]
 
+    def _cell_values(self, measure) -> NDArray[np.float64]:
+        base = self._cell_base(measure)
+        return base.values if isinstance(base, _measures.Fixed) else base
+
     def with_cell_measures(self, measures: dict) -> MorseHierarchy:
-        """The same hierarchy given each cell's measures ({measure: (M,) array}, as
-        `cell_measure` computes them), so that its cuts read no cell."""
+        """The same hierarchy given each cell's measures ({measure: what
+        `_measures.cell_measures` gives}), so that its cuts read no cell."""
         out = dataclasses.replace(self, _pruned={})
-        out._pruned.update({("cells", m): np.asarray(v, np.float64) for m, v in measures.items()})
+        out._pruned.update({("cells", m): v if isinstance(v, _measures.Fixed)
+                            else np.asarray(v, np.float64) for m, v in measures.items()})
         return out
 
     def _pruning(self, measure):
+        """(order, extinction, cell values) of the pruning to the end by `measure`: in
+        fixed point decided in groups of 64^3 voxels on a grid (`_prune_groups`; their
+        small heaps stay in cache), else sequentially."""
         if measure not in self._pruned:
             base = self._cell_base(measure)
-            order = np.empty(len(self.young), dtype=np.int64)
-            extinction = np.empty(len(self.young))
-            _prune.prune(self.source, self.target, len(self.maxima), base, order, extinction)
-            self._pruned[measure] = (order, extinction, base)
+            fixed = isinstance(base, _measures.Fixed)
+            if fixed and self._adjacency is None and len(self.shape) == 3:
+                leaf_of, tree = _prune_groups.grid_leaves(self.maxima, self.shape)
+                order, extinction = _prune_groups.grouped_prune(
+                    self.source, self.target, base.sums, leaf_of, tree)
+            else:
+                order = np.empty(len(self.young), dtype=np.int64)
+                extinction = np.empty(len(self.young), np.int64 if fixed else np.float64)
+                _prune.prune(self.source, self.target, len(self.maxima),
+                             base.sums if fixed else base, order, extinction)
+            if fixed:
+                extinction = extinction.astype(np.float64) * base.scale
+            self._pruned[measure] = (order, extinction, self._cell_values(measure))
         return self._pruned[measure]
 
     def threshold_for(self, n_regions: int, measure: str = "persistence",
@@ -259,7 +277,7 @@ class MorseHierarchy:
         if min_share == 0 or self.n_components == 1:
             return np.zeros(len(self.maxima), dtype=bool)
         component = self.component_of_maximum()
-        sizes = np.bincount(component, weights=self._cell_base("size"))
+        sizes = np.bincount(component, weights=self._cell_values("size"))
         return (sizes < min_share * sizes.sum())[component]
 
     def _merged_events(self, min_persistence, n_regions, measure, threshold, dropped):

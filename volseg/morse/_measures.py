@@ -22,13 +22,28 @@ from . import _prune
 from ._block_cells import block_cells, block_counts, gathered
 from ._block_objects import per_block
 
-__all__ = ["MEASURES", "STEPS", "check_measure", "cell_measures", "lazy_cell_measures"]
+__all__ = ["MEASURES", "STEPS", "Fixed", "check_measure", "cell_measures", "lazy_cell_measures"]
 
 #: The cut measures; ``persistence`` is the height of DESIGN.md section 5.
 MEASURES = ("persistence", "size", "hypervolume")
 #: Fixed-point steps of a hypervolume term per range (max - min) of the field:
 #: 2^-32 of the range, while a cell of 2^31 voxels still sums within int64.
 STEPS = 2.0 ** 32
+
+
+@dataclass(frozen=True)
+class Fixed:
+    """A measure of every cell in fixed point: `sums` (M,) int64 steps of `scale`. The
+    pruning adds the integers (exact in any order, so a pruning decided in groups
+    equals the sequential one, `_prune_groups`); `values` are what it reports."""
+
+    sums: np.ndarray
+    scale: float
+
+    @property
+    def values(self) -> np.ndarray:
+        """(M,) float64: the measure itself."""
+        return self.sums.astype(np.float64) * self.scale
 
 
 def check_measure(measure) -> str:
@@ -39,8 +54,9 @@ def check_measure(measure) -> str:
     return measure
 
 
-def cell_measures(hierarchy, measure: str) -> np.ndarray:
-    """(M,) float64: `measure` of each maximum's cell (``size`` or ``hypervolume``)."""
+def cell_measures(hierarchy, measure: str) -> Fixed | np.ndarray:
+    """`measure` of each maximum's cell (``size`` or ``hypervolume``): `Fixed` on a grid
+    or with a scalar vertex weight, (M,) float64 sums with a mesh's weights."""
     n_max = len(hierarchy.maxima)
     weight = hierarchy.vertex_weight
     hypervolume = measure == "hypervolume"
@@ -145,8 +161,8 @@ def _unit(low, high) -> float:
     return (float(high) - float(low)) / STEPS if high > low else 1.0
 
 
-def _scaled(sums, weight, unit) -> np.ndarray:
-    return sums.astype(np.float64) * ((1.0 if weight is None else float(weight)) * unit)
+def _scaled(sums, weight, unit) -> Fixed:
+    return Fixed(sums, (1.0 if weight is None else float(weight)) * unit)
 
 
 def _block_hypervolumes(cells, field, ids, saddles, block_id, unit):
@@ -158,7 +174,7 @@ def _block_hypervolumes(cells, field, ids, saddles, block_id, unit):
     return out
 
 
-def _summed(n_max, weight, unit, n_blocks, *parts) -> np.ndarray:
+def _summed(n_max, weight, unit, n_blocks, *parts) -> Fixed:
     """The (M,) measure from the blocks' ids and then their sums (1x1x1 object
     blocks)."""
     total = np.zeros(n_max, dtype=np.int64)
