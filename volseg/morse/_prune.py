@@ -188,21 +188,35 @@ def prune_events(source, target, base, order, extinction, child, sibling, prev, 
         order[n_merged] = e
         extinction[e] = value
         n_merged += 1
-        keep, gone = min(r, other), max(r, other)
-        parent[gone] = keep
-        # e is inside the union now: out of both ends' heaps (h ^ 1 is e's other entry)
-        heap_of[keep] = _meld(_pop(h, child, sibling, prev, stack),
-                              _delete(h ^ 1, heap_of[other], child, sibling, prev, stack),
-                              child, sibling, prev)
-        heap_of[gone] = -1
-        total = value + key[pos[other]]
-        n = _remove(gone, key, region, n, pos)
-        if heap_of[keep] < 0:         # the whole component: nothing leaves it
-            n = _remove(keep, key, region, n, pos)
-        else:                         # a larger key: down the heap
-            key[pos[keep]] = total
-            _sift_down(pos[keep], key, region, n, pos)
+        keep, gone = _joined(r, other, h, parent, heap_of, child, sibling, prev, stack)
+        n = _rekeyed(keep, gone, value + key[pos[other]], heap_of, key, region, n, pos)
     return n_merged
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _joined(r, other, h, parent, heap_of, child, sibling, prev, stack):
+    """Merge region r into `other` across its highest edge's entry h: (keep, gone),
+    the smaller index kept; the edge is inside the union now, so out of both ends'
+    heaps (h ^ 1 is its other entry)."""
+    keep, gone = min(r, other), max(r, other)
+    parent[gone] = keep
+    heap_of[keep] = _meld(_pop(h, child, sibling, prev, stack),
+                          _delete(h ^ 1, heap_of[other], child, sibling, prev, stack),
+                          child, sibling, prev)
+    heap_of[gone] = -1
+    return keep, gone
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _rekeyed(keep, gone, total, heap_of, key, region, n, pos):
+    """The regions' heap after a merge: `gone` out, `keep` down to its larger key
+    `total`, or out if no edge leaves it (its whole component). Returns the size."""
+    n = _remove(gone, key, region, n, pos)
+    if heap_of[keep] < 0:
+        return _remove(keep, key, region, n, pos)
+    key[pos[keep]] = total
+    _sift_down(pos[keep], key, region, n, pos)
+    return n
 
 
 @numba.njit(cache=True, nogil=True, inline="always")

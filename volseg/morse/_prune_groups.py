@@ -35,7 +35,7 @@ import numpy as np
 
 from .._union_find import find_root
 from ._group_tree import block_tree
-from ._prune import _before, _delete, _meld, _pop, _remove, _sift_down
+from ._prune import _before, _joined, _meld, _rekeyed, _remove, _sift_down
 
 __all__ = []
 
@@ -82,22 +82,13 @@ def prune_group(key, rid, u, v, out_key, out_id):
         decided[e], extinction[e], pruned[e] = True, key[r], rid[r]
         sequence[n_decided] = e
         n_decided += 1
-        keep, gone = min(r, other), max(r, other)
-        parent[gone] = keep
-        heap_of[keep] = _meld(_pop(h, child, sibling, prev, stack),
-                              _delete(h ^ 1, heap_of[other], child, sibling, prev, stack),
-                              child, sibling, prev)
-        heap_of[gone] = -1
-        key[keep] = key[r] + key[other]
+        total = key[r] + key[other]
+        keep, gone = _joined(r, other, h, parent, heap_of, child, sibling, prev, stack)
+        key[keep] = total
         blocked[keep] = blocked[other]
         if _before(low_key[gone], low_id[gone], low_key[keep], low_id[keep]):
             low_key[keep], low_id[keep] = low_key[gone], low_id[gone]
-        n = _remove(gone, hkey, region, n, pos)
-        if heap_of[keep] < 0:         # the whole component: nothing leaves it
-            n = _remove(keep, hkey, region, n, pos)
-        else:                         # a later place: down the heap
-            hkey[pos[keep]] = key[keep]
-            _sift_down(pos[keep], hkey, region, n, pos)
+        n = _rekeyed(keep, gone, total, heap_of, hkey, region, n, pos)
     root = np.empty(n_reg, dtype=np.int64)
     for m in range(n_reg):
         root[m] = find_root(parent, m)
