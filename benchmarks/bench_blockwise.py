@@ -5,6 +5,7 @@
                                          [--skip-in-memory-above 512] [--folder /tmp/bw]
                                          [--smooth SIGMA] [--repeat R] [--base REV]
                                          [--memory-limit BYTES] [--hierarchy-memory BYTES]
+                                         [--measure persistence]
 
 For each size N it writes a synthetic smooth uint8 field of N^3 voxels straight to a
 Zarr store, block by block (the field is a sum of sinusoids of the global
@@ -159,6 +160,8 @@ def main(argv=None) -> int:
     parser.add_argument("--repeat", type=int, default=1,
                         help="runs of every case, interleaved; the fastest is reported")
     parser.add_argument("--base", help="also run every case with this git revision's volseg")
+    parser.add_argument("--measure", help="volseg segment --measure for every run (default: "
+                        "volseg's; persistence: the cut in buckets, no hierarchy joined)")
     parser.add_argument("--memory-limit",
                         help="volseg segment --memory-limit for the blockwise runs (with "
                              "local: shared by its workers)")
@@ -184,7 +187,8 @@ def _main(args, trees) -> int:
         zarr_path, npy_path = write_inputs(folder, n, args.chunks, in_memory)
         print(f"{n}^3: inputs ready in {time.perf_counter() - start:.1f} s", flush=True)
         volseg = [sys.executable, "-m", "volseg", "segment", "--regions", "30", "-q", "--force",
-                  "--json", "--smooth", str(args.smooth)]
+                  "--json", "--smooth", str(args.smooth),
+                  *(["--measure", args.measure] if args.measure else [])]
         tag = f"_s{args.smooth:g}" if args.smooth else ""
         plain = [("in memory", "-", folder / f"mem{n}{tag}",
                   [str(npy_path), "--mask", "none"])] if in_memory else []

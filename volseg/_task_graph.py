@@ -46,3 +46,26 @@ class TaskGraph:
         graph = HighLevelGraph.from_collections(self.name, self.tasks,
                                                 dependencies=self.dependencies)
         return [Delayed(key, graph, layer=self.name) for key in keys]
+
+    def object_array(self, keys: dict, numblocks):
+        """A Dask object array of the block grid `numblocks` (chunks of one), holding
+        the result of ``keys[block index]`` in each block."""
+        import dask.array as da
+        import numpy as np
+        from dask.highlevelgraph import HighLevelGraph
+
+        for index, key in keys.items():
+            self.tasks[(self.name, *index)] = (_one_object, key, len(numblocks))
+        graph = HighLevelGraph.from_collections(self.name, self.tasks,
+                                                dependencies=self.dependencies)
+        return da.Array(graph, self.name, chunks=tuple((1,) * n for n in numblocks),
+                        dtype=object, meta=np.empty((0,) * len(numblocks), object))
+
+
+def _one_object(item, ndim: int):
+    """`item` as the one element of an object block of `ndim` dimensions."""
+    import numpy as np
+
+    out = np.empty((1,) * ndim, dtype=object)
+    out[(0,) * ndim] = item
+    return out

@@ -11,7 +11,8 @@ import numpy as np
 
 from .morse import CurveSample, HierarchyOnWorkers, curve_sample
 
-__all__ = ["CutReport", "LISTED_PERSISTENCES", "cut_of", "report_of"]
+__all__ = ["CutReport", "LISTED_PERSISTENCES", "MAX_COUNT_IN_BUCKETS", "cut_of", "in_buckets",
+           "report_of"]
 
 #: Event persistences listed in a summary, the largest first.
 LISTED_PERSISTENCES = 200
@@ -45,12 +46,56 @@ def cut_of(hierarchy, cut, out=None) -> tuple:
     """(labels 1..k, `CutReport`) of `cut` (a `volseg.segment.CutRequest`): lazy labels
     for a blockwise hierarchy, relabelled block by block; into `out` when given (in
     memory)."""
+    masked = hierarchy.mask is not None
     if isinstance(hierarchy, HierarchyOnWorkers):
         if out is not None:
             raise ValueError("`out` takes labels in memory; these are blockwise (lazy)")
-        return hierarchy.run(report_of, cut, measures=cut.measures(hierarchy.mask is not None))
-    region, report = report_of(hierarchy, hierarchy.mask is not None, cut)
+        if in_buckets(hierarchy, cut):
+            return _cut_in_buckets(hierarchy, cut, masked)
+        return hierarchy.run(report_of, cut, measures=cut.measures(masked))
+    region, report = report_of(hierarchy, masked, cut)
     return hierarchy.relabel(region, out=out), report
+
+
+#: The largest region count a blockwise cut chooses from the buckets' heads (each
+#: bucket sends its count + 1 largest persistences to the client); above it the cut
+#: runs where the hierarchy is joined.
+MAX_COUNT_IN_BUCKETS = 100_000
+
+
+def in_buckets(hierarchy, cut) -> bool:
+    """Whether the cut of a blockwise `hierarchy` runs where its buckets are, joining
+    no maximum (`volseg.morse.HierarchyOnWorkers.cut_in_buckets`): a persistence cut
+    of at most `MAX_COUNT_IN_BUCKETS` regions."""
+    return (hierarchy.buckets is not None and cut.measure == "persistence"
+            and cut.ranks_read <= MAX_COUNT_IN_BUCKETS + 1)
+
+
+def _cut_in_buckets(hierarchy, cut, masked: bool) -> tuple:
+    min_component = cut.min_component if masked else 0.0
+    dropped = hierarchy.dropped_components(min_component) if min_component > 0 else None
+    head = hierarchy.head(max(LISTED_PERSISTENCES, cut.ranks_read), dropped)
+    listed = head if dropped is None else hierarchy.head(LISTED_PERSISTENCES)
+    asked = cut.of(head, masked)
+    labels, (top_maxima, top_values, top_persistence), curve = hierarchy.cut_in_buckets(
+        head, asked["threshold"], asked["n_regions"], dropped)
+    k = len(top_maxima)
+    report = CutReport(
+        _record(cut, asked, k, head), k, top_maxima, top_values, top_persistence,
+        listed.n_maxima, listed.n_components, listed.n_events,
+        listed.persistence[:LISTED_PERSISTENCES].copy(), curve)
+    return labels, report
+
+
+def _record(cut, asked: dict, k: int, hierarchy) -> dict:
+    """The cut asked and made, as a report records it (`hierarchy` gives the threshold
+    of a count)."""
+    threshold = (float(cut.threshold) if cut.threshold is not None
+                 else hierarchy.threshold_for(k, cut.measure, asked["min_component"]))
+    return {"measure": cut.measure, "threshold": cut.threshold,
+            "min_persistence": cut.min_persistence, "n_regions": asked["n_regions"],
+            "auto": cut.auto, "cut_threshold": threshold,
+            "min_component": asked["min_component"]}
 
 
 def report_of(hierarchy, masked: bool, cut) -> tuple:
@@ -59,12 +104,7 @@ def report_of(hierarchy, masked: bool, cut) -> tuple:
     asked = cut.of(hierarchy, masked)
     region = hierarchy.region_of_maximum(**asked)
     k = int(region.max()) + 1
-    threshold = (float(cut.threshold) if cut.threshold is not None
-                 else hierarchy.threshold_for(k, cut.measure, asked["min_component"]))
-    record = {"measure": cut.measure, "threshold": cut.threshold,
-              "min_persistence": cut.min_persistence, "n_regions": asked["n_regions"],
-              "auto": cut.auto, "cut_threshold": threshold,
-              "min_component": asked["min_component"]}
+    record = _record(cut, asked, k, hierarchy)
     # Maximum ids run by decreasing value: the first id seen per region is its top
     # (-1, a dropped component, sorts first).
     ids, tops = np.unique(region, return_index=True)

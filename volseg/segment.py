@@ -250,6 +250,13 @@ class CutRequest:
         return {"n_regions": n_regions, "measure": self.measure, "threshold": self.threshold,
                 "min_component": min_component}
 
+    @property
+    def ranks_read(self) -> int:
+        """How many of the largest extinctions choosing this cut reads (0: a threshold)."""
+        if self.auto:
+            return AUTO_REGION_RANGE[1] + 1
+        return 0 if self.n_regions is None else self.n_regions + 1
+
     def measures(self, masked: bool) -> tuple:
         """The cells' measures the cut reads: its own, and the sizes that
         `min_component` weighs the components by."""

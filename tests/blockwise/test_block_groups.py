@@ -135,16 +135,8 @@ def test_the_client_holds_no_outer_layer(monkeypatch):
     # maxima and the events), never the blocks' outer layers or their forests.
     field = smooth_random_field((40, 40, 40), np.random.default_rng(9), sigma=1.0)
     received = []
-
-    def compute(*collections, stage):
-        results = dask.compute(*collections)
-        received.extend(results)
-        return results
-
-    from volseg._block_hooks import BlockHooks
-
     lazy = _blocks.dask_descending_complex(da.from_array(field, chunks=10), "kuhn",
-                                           hooks=BlockHooks(compute=compute))
+                                           hooks=recording(received))
     total = sum(_nbytes(r) for r in received)
     per_maximum = total / len(lazy.maxima)
     assert per_maximum < 65            # 16 B for the maxima + 48 B for the events
@@ -185,16 +177,8 @@ def test_a_cut_on_the_workers_sends_the_client_nothing_per_maximum(measure):
     field = smooth_random_field((40, 40, 40), np.random.default_rng(9), sigma=1.0)
     mask = field > np.quantile(field, 0.2)          # several components: min_component
     received = []
-
-    def compute(*collections, stage):
-        results = dask.compute(*collections)
-        received.extend(results)
-        return results
-
-    from volseg._block_hooks import BlockHooks
-
     lazy = descending_complex(da.from_array(field, chunks=10), mask=mask, on_workers=True,
-                              block_hooks=BlockHooks(compute=compute))
+                              block_hooks=recording(received))
     cut = CutRequest.checked(n_regions="auto", measure=measure, min_component=0.01)
     labels, report = cut_of(lazy, cut)
     n_maxima = lazy.n_maxima
@@ -213,6 +197,17 @@ def test_a_cut_on_the_workers_sends_the_client_nothing_per_maximum(measure):
     assert report.n_regions == expected_report.n_regions and report.record == expected_report.record
     assert np.array_equal(report.top_maxima, expected_report.top_maxima)
     assert np.array_equal(report.curve.values, expected_report.curve.values)
+
+
+def recording(received: list):
+    """Block hooks whose computes add what the client receives to `received`."""
+    from volseg._block_hooks import BlockHooks
+
+    def compute(*collections, stage):
+        results = dask.compute(*collections)
+        received.extend(results)
+        return results
+    return BlockHooks(compute=compute)
 
 
 def _arrays(item):

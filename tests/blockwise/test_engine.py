@@ -267,7 +267,7 @@ def test_the_hierarchy_is_joined_and_cut_on_the_worker_given_for_it():
             (key_split(k), t.resource_restrictions)
             for k, t in dask_scheduler.tasks.items() if t.resource_restrictions])
         # (getitem: the cut's table taken from its result, for the gathers)
-        assert {name for name, _ in restricted} == {"cell_saddles", "core", "run",
+        assert {name for name, _ in restricted} == {"cell_saddles", "joined", "run",
                                                     "summed", "gather", "getitem"}, restricted
         assert all(r == {engine_module.HIERARCHY_RESOURCE: 1} for _, r in restricted)
         # The saddles' and the regions' share of each block, nothing else per block
@@ -276,6 +276,61 @@ def test_the_hierarchy_is_joined_and_cut_on_the_worker_given_for_it():
         # The hierarchy stays there; the cut's result, once its table is gathered for
         # each block, is let go.
         held = {key_split(k): v for k, v in engine.client.who_has().items() if v}
-        assert set(held["core"]) == big and "run" not in held, held
+        assert set(held["joined"]) == big and "run" not in held, held
     expected, expected_report = cut_of(descending_complex(field), cut)
     assert np.array_equal(labels, expected) and report.n_regions == expected_report.n_regions
+
+
+@pytest.mark.slow
+def test_a_persistence_cut_on_a_cluster_joins_no_hierarchy():
+    """The scheduler's accounting of every task result of a blockwise persistence cut,
+    small components dropped, on two worker processes (issue 30): no task joins the
+    events (`joined`), none
+    holds a quarter of the maxima's and events' bytes (40 B each, as the buckets keep
+    them), and the cut runs on none of them in particular (no restriction). The labels
+    and the report are those of the cut in memory."""
+    import dask.array as da
+    from dask.utils import key_split
+    from distributed.diagnostics.plugin import SchedulerPlugin
+
+    from volseg._block_hooks import BlockHooks
+    from volseg.cuts import cut_of
+    from volseg.morse import descending_complex
+    from volseg.segment import CutRequest
+
+    class Largest(SchedulerPlugin):
+        def __init__(self):
+            self.largest, self.names = {}, set()
+
+        def transition(self, key, start, finish, *args, **kwargs):
+            task = self.scheduler.tasks.get(key)
+            self.names.add(key_split(key))
+            if task is not None and task.nbytes > 0:
+                name = key_split(key)
+                self.largest[name] = max(self.largest.get(name, 0), task.nbytes)
+
+    # A noisy field: its maxima's bytes well above a group's faces' (O(N^2)).
+    field = smooth_random_field((40, 40, 40), np.random.default_rng(9), sigma=0.5)
+    mask = field > np.quantile(field, 0.3)          # many components, the small ones dropped
+    cut = CutRequest.checked(n_regions="auto", measure="persistence", min_component=0.01)
+    with engine_module.Engine("local", workers=2, memory_limit="2GiB") as engine:
+        largest = Largest()
+        largest.scheduler = engine.client.cluster.scheduler     # in this process
+        largest.scheduler.add_plugin(largest)
+        hooks = BlockHooks(compute=engine.compute, persist=engine.persist)
+        lazy = descending_complex(da.from_array(field, chunks=10), on_workers=True,
+                                  mask=da.from_array(mask, chunks=10), block_hooks=hooks)
+        labels, report = cut_of(lazy, cut)
+        labels = np.asarray(labels.compute())
+        restricted = engine.client.run_on_scheduler(lambda dask_scheduler: [
+            key_split(k) for k, t in dask_scheduler.tasks.items() if t.resource_restrictions])
+    sizes, names = largest.largest, largest.names
+    assert lazy.n_maxima > 3000 and not restricted
+    assert "joined" not in names and "volseg-morse-buckets" in names, names
+    whole = 40 * lazy.n_maxima
+    sizes.pop("finalize-hlgfinalizecompute")      # this test's own gather of the labels
+    assert max(sizes.values()) < whole / 4, sorted(sizes.items(), key=lambda i: -i[1])[:5]
+    expected, expected_report = cut_of(descending_complex(field, mask=mask), cut)
+    assert np.array_equal(labels, expected) and report.n_regions == expected_report.n_regions
+    assert np.array_equal(report.top_maxima, expected_report.top_maxima)
+    assert report.curve.n_components < report.n_components     # some were dropped

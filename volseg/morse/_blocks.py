@@ -21,15 +21,16 @@
    the only edges that can merge components, about one per cell.
 5. On the workers: the elder-rule union-find decided in the same tree of block
    groups (`_group_tree`): each group decides the events its faces cannot change and
-   passes the rest up. One task joins the decided events in sweep order and the
-   maxima from the sample sort's buckets: the same maxima, events and persistence as
-   in memory, for any chunking (tested).
+   passes the rest up. The decided events go to the sample sort's buckets of maximum
+   ids, each to its young maximum's (`_buckets`): the same maxima, events and
+   persistence as in memory, for any chunking (tested), and no task holds them all.
 
-`dask_hierarchy` returns that task's result kept where it was computed
-(`HierarchyOnWorkers`: on a cluster, one worker's memory), its `cells` a lazy Dask
-array; a cut runs beside it and the client receives the maxima's count and the cut's
-small result (`volseg.cuts`), nothing per maximum or per voxel (tested).
-`dask_descending_complex` fetches it whole (about 64 B per maximum).
+`dask_hierarchy` returns the buckets kept where they were computed
+(`HierarchyOnWorkers`), its `cells` a lazy Dask array; a persistence cut runs where
+the buckets are, any other cut beside one task that joins them (on a cluster, one
+worker's memory), and the client receives the maxima's count and the cut's small
+result (`volseg.cuts`), nothing per maximum or per voxel (tested).
+`dask_descending_complex` fetches the joined hierarchy whole (about 64 B per maximum).
 """
 
 from __future__ import annotations
@@ -46,11 +47,10 @@ from .._block_hooks import BlockHooks
 from .._halo import block_starts, with_halo
 from .._task_graph import TaskGraph
 from . import _block_kernels as kernels
-from . import _exits, _group_tree, _kernels, _measures, _ranks
+from . import _buckets, _exits, _group_tree, _kernels, _measures, _ranks
 from ._block_objects import only, per_block
 from ._edges import _cross_edges, _saddle_order
 from ._graph import _Neighbourhood, grid_offsets
-from ._hierarchy import MorseHierarchy
 from ._on_workers import HierarchyOnWorkers
 from ._phases import _Phases
 
@@ -186,13 +186,14 @@ def _faces(halo_cells, origin, shape) -> list:
 class _Maxima:
     """Stage 2's result: their count and the index type of their ids on the client;
     every maximum (gid) and its value, by decreasing (value, index) (a maximum's id is
-    its position), as the sample sort's buckets kept on the workers (a Delayed); the
+    its position), as the sample sort's buckets kept on the workers (a Delayed each:
+    consecutive ids, `_buckets`); the
     field's (min, max) in the mask, from the ascent's blocks (what a hypervolume's
     fixed point needs: no pass of its own)."""
 
     n_maxima: int
     index_type: type
-    buckets: object
+    buckets: list
     low_high: tuple
 
 
@@ -277,25 +278,16 @@ def dask_hierarchy(field, connectivity="kuhn", mask=None, hooks=None) -> Hierarc
     decided = hooks.persist(*_group_tree_of(forests),
                             stage="Morse: cross-cell edges and union-find per block group")
     phases.done("blocks: cells, cross-cell edges, union-find in block groups")
-    core, = hooks.persist(dask.delayed(_core, pure=True)(shape, maxima.n_maxima,
-                                                         maxima.buckets, *decided),
-                          stage="Morse: the events joined in sweep order", hierarchy=True)
+    buckets, firsts = _buckets.bucketed(maxima.buckets, decided, maxima.index_type)
+    *buckets, firsts = hooks.persist(*buckets, firsts,
+                                     stage="Morse: the events, in buckets of maximum ids")
     del decided
-    phases.done("a worker: the events joined in sweep order")
+    phases.done("buckets of maximum ids: the events by their young maximum")
+    # The whole hierarchy in one task, made only when a cut needs it (`HierarchyOnWorkers`).
+    core = dask.delayed(_buckets.joined, pure=True)(shape, *buckets)
     return HierarchyOnWorkers(core, maxima.n_maxima, shape, cells, mask, field, connectivity,
-                              phases.times, hooks, field_range=maxima.low_high)
-
-
-def _core(shape, n_maxima, buckets, *decided) -> MorseHierarchy:
-    """The hierarchy without cells, field or mask, in one task: the maxima from the
-    sample sort's buckets, the decided events joined in sweep order with their elders
-    (`_group_tree.assembled`)."""
-    young, elder, target, source, saddle, saddle_values = _group_tree.assembled(
-        list(decided), n_maxima)
-    return MorseHierarchy(
-        shape=shape, cells=None, maxima=np.concatenate([b[0] for b in buckets]),
-        values=np.concatenate([b[1] for b in buckets]), young=young, elder=elder, target=target,
-        source=source, saddle=saddle, saddle_value=saddle_values, mask=None, _field=None)
+                              phases.times, hooks, field_range=maxima.low_high,
+                              buckets=buckets, firsts=firsts)
 
 
 def _checked_field(field, mask):
@@ -332,7 +324,7 @@ def _ids_and_exits(ascent, grid: _Grid, hooks) -> tuple:
     order = list(np.ndindex(shape))
     summaries = {i: graph(only, (ascent.name, *i)) for i in order}
     ranks, total, buckets = _ranks.ranks_of(graph, [graph(_maxima_of, summaries[i])
-                                                    for i in order], _buckets(len(order)))
+                                                    for i in order], _bucket_count(len(order)))
     ranks = dict(zip(order, ranks, strict=True))
     groups = _group_tree.block_tree(shape)
     face_map, exits, down, halves = [], [], {}, {}
@@ -357,9 +349,10 @@ def _ids_and_exits(ascent, grid: _Grid, hooks) -> tuple:
     tables = [graph(_one_block, graph(_exits.table, ranks[i], leaves[i])) for i in order]
     low_high = graph(_measures.range_of,
                      *[graph(operator.itemgetter(4), summaries[i]) for i in order])
-    *tables, total, low_high, buckets = hooks.persist(
-        *graph.delayed([*tables, total, low_high, graph(list, buckets)]),
-        stage="Morse: steepest ascent, maxima ids, exits")
+    n_buckets = len(buckets)
+    *tables, total, low_high, buckets = _split_last(hooks.persist(
+        *graph.delayed([*tables, total, low_high, *buckets]),
+        stage="Morse: steepest ascent, maxima ids, exits"), n_buckets)
     n_maxima, low_high = hooks.compute(total, low_high, stage="Morse: the maxima, counted")
     if not n_maxima:
         raise ValueError("`mask` selects no vertex")
@@ -369,6 +362,11 @@ def _ids_and_exits(ascent, grid: _Grid, hooks) -> tuple:
     return (da.block(grid_of_tables.tolist()),
             _Maxima(int(n_maxima), np.int32 if n_maxima < 2**31 - 1 else np.int64, buckets,
                     low_high))
+
+
+def _split_last(items, n: int) -> tuple:
+    """(*items[:-n], items[-n:] as a list)."""
+    return (*items[:-n], list(items[-n:]))
 
 
 def _no_answers():
@@ -386,7 +384,7 @@ def _maxima_of(summary):
     return summary[0], summary[1]
 
 
-def _buckets(n_blocks: int) -> int:
+def _bucket_count(n_blocks: int) -> int:
     """Buckets of the maxima's sample sort: enough that each stays small next to a block's
     work, few enough that the blocks x buckets pieces stay a small graph."""
     return max(1, min(32, n_blocks))

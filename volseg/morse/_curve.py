@@ -36,11 +36,15 @@ def curve_sample(extinction, n_components: int, thin: bool = True) -> CurveSampl
     """The `CurveSample` of the events' `extinction`; `thin` False keeps every rank."""
     p = np.sort(np.asarray(extinction, dtype=np.float64))[::-1]
     p = p[p > 0]
-    n = len(p)
+    ranks = sample_ranks(len(p), thin)
+    return CurveSample(p[ranks], ranks, len(p), int(n_components))
+
+
+def sample_ranks(n_positive: int, thin: bool = True) -> np.ndarray:
+    """The ranks a `CurveSample` of `n_positive` positive extinctions keeps."""
+    n = n_positive
     if not thin or n <= EXACT:
-        ranks = np.arange(n)
-    else:
-        steps = int(np.ceil(np.log(n / EXACT) / np.log(STEP))) + 1
-        far = np.geomspace(EXACT, n - 1, steps).astype(np.int64)
-        ranks = np.unique(np.concatenate([np.arange(EXACT), far, [n - 1]]))
-    return CurveSample(p[ranks], ranks, n, int(n_components))
+        return np.arange(n)
+    steps = int(np.ceil(np.log(n / EXACT) / np.log(STEP))) + 1
+    far = np.geomspace(EXACT, n - 1, steps).astype(np.int64)
+    return np.unique(np.concatenate([np.arange(EXACT), far, [n - 1]]))

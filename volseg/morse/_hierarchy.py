@@ -219,12 +219,7 @@ class MorseHierarchy:
         _, n_regions = check_cut(n_regions=n_regions)
         extinction, components = self.curve(measure, min_component)
         p = np.sort(extinction)[::-1]
-        keep = n_regions - components
-        if keep <= 0:
-            return float(p[0]) + 1.0 if len(p) else 0.0
-        if keep >= len(p):
-            return 0.0
-        return 0.5 * float(p[keep - 1] + p[keep])
+        return midpoint_threshold(p, len(p), components, n_regions)
 
     def regions_at(self, thresholds, measure: str = "persistence") -> NDArray[np.int64]:
         """Region count of the cut at each threshold of `measure` (the persistence
@@ -247,17 +242,7 @@ class MorseHierarchy:
             raise ValueError(f"`region_range` must be counts 1 <= lo <= hi, got {region_range!r}")
         extinction, components = self.curve(measure, min_component)
         p = np.sort(extinction)[::-1]
-        best, best_gap = None, -np.inf
-        for k in range(max(lo, components), hi + 1):
-            keep = k - components
-            if keep < 1 or keep >= len(p):
-                continue
-            gap = np.log(p[keep - 1]) - np.log(p[keep]) if p[keep] > 0 else np.inf
-            if gap > best_gap:
-                best, best_gap = k, gap
-        if best is None:
-            return max(min(hi, len(self.maxima)), 1)
-        return best
+        return widest_gap_count(p, len(p), components, (lo, hi), len(self.maxima))
 
     def component_of_maximum(self) -> NDArray[np.int32]:
         """(M,) the connected component of the graph (of the mask) of each maximum,
@@ -277,7 +262,11 @@ class MorseHierarchy:
         if min_share == 0 or self.n_components == 1:
             return np.zeros(len(self.maxima), dtype=bool)
         component = self.component_of_maximum()
-        sizes = np.bincount(component, weights=self._cell_values("size"))
+        # In vertices (exact integers) on a grid, as where a blockwise hierarchy's
+        # buckets are (`_bucket_cut.small_components`); a mesh's weights otherwise.
+        base = self._cell_base("size")
+        sizes = np.bincount(component, weights=base.sums if isinstance(base, _measures.Fixed)
+                            else base)
         return (sizes < min_share * sizes.sum())[component]
 
     def _merged_events(self, min_persistence, n_regions, measure, threshold, dropped):
@@ -287,15 +276,7 @@ class MorseHierarchy:
         keep = None
         if n_regions is not None:
             components = self.n_components - len(np.unique(self.component_of_maximum()[dropped]))
-            if n_regions > len(self.maxima):
-                warnings.warn(
-                    f"asked for {n_regions} regions but the field has only "
-                    f"{len(self.maxima)} maxima; returning all of them", stacklevel=3)
-            elif n_regions < components:
-                warnings.warn(
-                    f"asked for {n_regions} regions but the graph has {components} "
-                    "connected components; returning one region per component", stacklevel=3)
-            keep = max(n_regions - components, 0)
+            keep = events_kept(n_regions, len(self.maxima), components, stacklevel=4)
         if measure == "persistence":
             p = np.where(gone, -np.inf, self.event_persistence)
             if keep is not None:
@@ -459,6 +440,48 @@ class MorseHierarchy:
             for k, s in zip(key[order][last], saddles[order][last], strict=True):
                 graph.add_edge(int(regions[k // n]), int(regions[k % n]), saddle=float(s))
         return graph
+
+
+def events_kept(n_regions: int, n_maxima: int, components: int, stacklevel: int = 2) -> int:
+    """How many events a cut into `n_regions` keeps unmerged, with a warning when the
+    count cannot be met (more regions than maxima, fewer than components)."""
+    if n_regions > n_maxima:
+        warnings.warn(f"asked for {n_regions} regions but the field has only {n_maxima} "
+                      "maxima; returning all of them", stacklevel=stacklevel)
+    elif n_regions < components:
+        warnings.warn(f"asked for {n_regions} regions but the graph has {components} "
+                      "connected components; returning one region per component",
+                      stacklevel=stacklevel)
+    return max(n_regions - components, 0)
+
+
+def midpoint_threshold(p, n_events: int, components: int, n_regions: int) -> float:
+    """`MorseHierarchy.threshold_for` from the extinctions sorted decreasing: `p`, the
+    first of `n_events` of them (at least ``n_regions + 1`` where there are as many)."""
+    keep = n_regions - components
+    if keep <= 0:
+        return float(p[0]) + 1.0 if n_events else 0.0
+    if keep >= n_events:
+        return 0.0
+    return 0.5 * float(p[keep - 1] + p[keep])
+
+
+def widest_gap_count(p, n_events: int, components: int, region_range, n_maxima: int) -> int:
+    """`MorseHierarchy.largest_gap` from the extinctions sorted decreasing: `p`, the
+    first of `n_events` of them (at least ``region_range[1] + 1`` where there are as
+    many), with a checked `region_range`."""
+    lo, hi = region_range
+    best, best_gap = None, -np.inf
+    for k in range(max(lo, components), hi + 1):
+        keep = k - components
+        if keep < 1 or keep >= n_events:
+            continue
+        gap = np.log(p[keep - 1]) - np.log(p[keep]) if p[keep] > 0 else np.inf
+        if gap > best_gap:
+            best, best_gap = k, gap
+    if best is None:
+        return max(min(hi, n_maxima), 1)
+    return best
 
 
 def _all_but_most_persistent(p, young, keep):

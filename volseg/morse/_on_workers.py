@@ -1,13 +1,17 @@
-"""`HierarchyOnWorkers`: the blockwise build's hierarchy, kept where it was assembled.
+"""`HierarchyOnWorkers`: the blockwise build's hierarchy, kept on the workers.
 
-The per-maximum arrays (maxima, values, events: about 64 bytes per maximum) stay in
-the task that joined them (on a cluster, in one worker's memory), and a cut runs in a
-task beside them (`run`): the cells' measures summed on the workers, the pruning, the
-region of every maximum and its relabelling table made there, each block sent its own
-cells' share of it (`_block_cells`: no block worker receives an array of every maximum),
-and only the cut's small result (O(regions) and a thinned curve) sent to the client
-(issue 30). The same functions run in memory
-on a `MorseHierarchy`: one cut, written once.
+The maxima and their events (about 40 bytes per maximum) stay in buckets of
+consecutive maximum ids (`_buckets`), each bucket a task's result on some worker. A
+persistence cut runs where the buckets are (`cut_in_buckets`, `_bucket_cut`, the
+components that ``min_component`` drops found there too): no task holds every
+maximum. A size measure's cut joins the buckets in one task (`core`, on
+a cluster one worker's memory, about 64 bytes per maximum) and runs in a task beside
+it (`run`): the cells' measures summed on the workers, the pruning, the region of
+every maximum and its relabelling table made there, each block sent its own cells'
+share of it (`_block_cells`: no block worker receives an array of every maximum). Either
+way only the cut's small result (O(regions) and a thinned curve) reaches the client
+(issue 30). `run` calls the same functions as in memory on a `MorseHierarchy`: one
+cut, written once.
 """
 
 from __future__ import annotations
@@ -18,7 +22,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._block_hooks import BlockHooks
-from ._block_cells import block_cells, gathered, looked_up
+from . import _bucket_cut as in_buckets
+from ._block_cells import block_cells, block_counts, gathered, looked_up
+from ._curve import CurveSample, sample_ranks
 from ._hierarchy import MorseHierarchy, checked_weight, region_table
 from ._measures import lazy_cell_measures
 
@@ -29,11 +35,14 @@ __all__ = ["HierarchyOnWorkers"]
 class HierarchyOnWorkers:
     """A blockwise `MorseHierarchy` whose per-maximum arrays stay on the workers.
 
-    `core` is a Delayed (persisted) of the hierarchy without cells, field or mask;
-    `cells` the lazy cells. `run` cuts it where it is; reading anything else of
-    `MorseHierarchy` (``maxima``, ``segment``, ...) fetches it whole to the client,
-    once (`fetch`), so the handle is a `MorseHierarchy` to a caller that needs one.
-    `field_range`: the field's (min, max) in the mask, as the ascent found it.
+    `buckets` are Delayed (persisted) `_buckets.Bucket`s, `firsts` their first ids;
+    `core` a lazy Delayed of the hierarchy without cells, field or mask, joined from
+    them (persisted where the hierarchy is, on first need); `cells` the lazy cells.
+    `cut_in_buckets` cuts by persistence where the buckets are, `run` where `core` is;
+    reading anything else of `MorseHierarchy` (``maxima``, ``segment``, ...) fetches
+    it whole to the client, once (`fetch`), so the handle is a `MorseHierarchy` to a
+    caller that needs one. `field_range`: the field's (min, max) in the mask, as the
+    ascent found it.
     """
 
     core: object
@@ -47,13 +56,17 @@ class HierarchyOnWorkers:
     hooks: BlockHooks
     vertex_weight: object = None
     field_range: tuple | None = None
+    buckets: list | None = None
+    firsts: object = None
     _fetched: MorseHierarchy | None = None
     _blocks: object = None
+    _joined: object = None
 
     def fetch(self) -> MorseHierarchy:
         """The whole hierarchy on the client (computed once)."""
         if self._fetched is None:
-            core, = self.hooks.compute(self.core, stage="Morse: the hierarchy, to the client")
+            core, = self.hooks.compute(self._joined or self.core,
+                                       stage="Morse: the hierarchy, to the client")
             self._fetched = dataclasses.replace(
                 core, cells=self.cells, mask=self.mask, _field=self._field,
                 _connectivity=self._connectivity, timings=self.timings,
@@ -61,7 +74,7 @@ class HierarchyOnWorkers:
         return self._fetched
 
     def __getattr__(self, name):
-        if name.startswith("__") or name in ("_fetched", "_blocks"):   # copy, pickle
+        if name.startswith("__") or name in ("_fetched", "_blocks", "_joined"):  # copy, pickle
             raise AttributeError(name)
         return getattr(self.fetch(), name)
 
@@ -69,6 +82,13 @@ class HierarchyOnWorkers:
         """`MorseHierarchy.with_vertex_weight`, kept on the workers."""
         return dataclasses.replace(self, vertex_weight=checked_weight(weight, self.shape),
                                    _fetched=None)
+
+    def _hierarchy(self):
+        """`core` persisted where the hierarchy is, once: the events joined (`_buckets.joined`)."""
+        if self._joined is None:
+            self._joined, = self.hooks.persist(self.core, stage="Morse: the events joined in "
+                                               "sweep order", hierarchy=True)
+        return self._joined
 
     def run(self, function, *args, measures=()) -> tuple:
         """(lazy labels, result) of ``function(hierarchy, masked, *args) -> (region,
@@ -84,7 +104,7 @@ class HierarchyOnWorkers:
         persist = self.hooks.persist
         ids = self._block_cells()
         totals = lazy_cell_measures(
-            self.cells, self._field, self.n_maxima, self.vertex_weight, self.core, measures,
+            self.cells, self._field, self.n_maxima, self.vertex_weight, self._hierarchy(), measures,
             lambda d: self.hooks.compute(d, stage="Morse: the field's range")[0],
             ids=ids, low_high=self.field_range,
             place=lambda *lazy: persist(*lazy, stage="Morse: the cells' saddles, where "
@@ -96,13 +116,45 @@ class HierarchyOnWorkers:
             totals = dict(zip(totals, persist(*totals.values(), stage="Morse: the cells' "
                                               "measures summed, where the hierarchy is",
                                               hierarchy=True), strict=True))
-        task = dask.delayed(_run, pure=True)(self.core, self.vertex_weight, masked, function,
-                                             args, tuple(totals), *totals.values())
+        task = dask.delayed(_run, pure=True)(self._hierarchy(), self.vertex_weight, masked,
+                                             function, args, tuple(totals), *totals.values())
         task, = persist(task, stage="Morse: the cut, where the hierarchy is", hierarchy=True)
         regions, = persist(gathered(ids, task[0]), stage="Morse: each block's regions, where "
                            "the hierarchy is", hierarchy=True)
         result, = self.hooks.compute(task[1], stage="Morse: the cut's result")
         return looked_up(self.cells, ids, regions, np.int32), result
+
+    def head(self, length: int, dropped=None) -> in_buckets.Head:
+        """The events' `Head` (`_bucket_cut`): the `length` largest persistences and the
+        counts, from the buckets (nothing joined), without the maxima `dropped`
+        (`dropped_components`)."""
+        return in_buckets.heads(self.buckets, length, self.hooks, dropped)
+
+    def dropped_components(self, min_share: float) -> list:
+        """Each bucket's maxima (persisted) in the components of the graph holding less
+        than `min_share` of its vertices: what ``min_component`` drops."""
+        ids = self._block_cells()
+        counts, = self.hooks.persist(block_counts(self.cells),
+                                     stage="Morse: each block's cell sizes")
+        return in_buckets.dropped_maxima(self.buckets, self.firsts, ids, counts, min_share,
+                                         self.hooks)
+
+    def cut_in_buckets(self, head: in_buckets.Head, min_persistence=None, n_regions=None,
+                       dropped=None) -> tuple:
+        """A persistence cut where the buckets are (`_bucket_cut`): no task holds every
+        maximum. Returns (lazy labels 1..k, 0 in `dropped` components, (voxel, value,
+        persistence) of each region's highest maximum, the persistences' `CurveSample`);
+        `head` from `head` with the same `dropped`, long enough for `n_regions`."""
+        rule = in_buckets.rule_of(head, min_persistence, n_regions)
+        states = in_buckets.regions(self.buckets, self.firsts, rule, self.hooks, dropped)
+        ids = self._block_cells()
+        labels, = self.hooks.persist(in_buckets.block_labels(states, self.firsts, ids),
+                                     stage="Morse: each block's regions, from the buckets")
+        top = in_buckets.tops(states, self.buckets, self.hooks)
+        ranks = sample_ranks(head.n_positive)
+        curve = CurveSample(in_buckets.curve_values(self.buckets, ranks, self.hooks, dropped),
+                            ranks, head.n_positive, head.n_components)
+        return looked_up(self.cells, ids, labels, np.int32), top, curve
 
     def _block_cells(self):
         """Each block's distinct cells (`_block_cells.block_cells`), found once and kept

@@ -1,0 +1,190 @@
+"""A persistence cut where the blockwise hierarchy's buckets of maximum ids are
+(issue 30): labels and report exactly those of the cut in memory, for every kind of
+persistence cut, chunking, tie and mask, with no task joining every maximum."""
+
+import warnings
+
+import dask
+import dask.array as da
+import numpy as np
+import pytest
+
+from volseg import descending_complex
+from volseg.cuts import cut_of, in_buckets
+from volseg.morse import _bucket_cut, _buckets, _kernels
+from volseg.segment import CutRequest
+
+from ..conftest import smooth_random_field
+from .test_block_groups import _arrays, recording
+
+CUTS = [dict(n_regions="auto"), dict(n_regions=5), dict(n_regions=1),
+        dict(min_persistence=0.0), dict(min_persistence=1.0), dict(min_persistence=np.inf)]
+
+
+@pytest.fixture(autouse=True)
+def _synchronous():
+    with dask.config.set(scheduler="synchronous"):
+        yield
+
+
+@pytest.fixture
+def never_joined(monkeypatch):
+    """The whole hierarchy must not be joined in one task: `_buckets.joined` fails."""
+    def joined(*args):
+        raise AssertionError("the events were joined in one task")
+    monkeypatch.setattr(_buckets, "joined", joined)
+
+
+def assert_same_report(report, expected):
+    assert report.n_regions == expected.n_regions and report.record == expected.record
+    for name in ("top_maxima", "top_values", "top_persistence", "largest_persistences"):
+        assert np.array_equal(getattr(report, name), getattr(expected, name)), name
+    assert (report.n_maxima, report.n_components, report.n_events) == \
+        (expected.n_maxima, expected.n_components, expected.n_events)
+    for name in ("values", "ranks"):
+        assert np.array_equal(getattr(report.curve, name), getattr(expected.curve, name))
+    assert (report.curve.n_positive, report.curve.n_components) == \
+        (expected.curve.n_positive, expected.curve.n_components)
+
+
+def _both(field, chunks, mask=None, connectivity="kuhn"):
+    """(the blockwise hierarchy kept on the workers, the in-memory one)."""
+    return (descending_complex(da.from_array(field, chunks=chunks), mask=mask,
+                               connectivity=connectivity, on_workers=True),
+            descending_complex(field, mask=mask, connectivity=connectivity))
+
+
+def _cut_both(both, cut):
+    lazy, whole = both
+    assert in_buckets(lazy, cut)
+    labels, report = cut_of(lazy, cut)
+    expected, expected_report = cut_of(whole, cut)
+    assert np.array_equal(np.asarray(labels), expected)
+    assert_same_report(report, expected_report)
+    return report
+
+
+@pytest.mark.parametrize("asked", CUTS)
+@pytest.mark.parametrize("chunks", [(2, 3, 2), (5, 7, 4)])
+def test_every_persistence_cut_equals_the_one_in_memory(asked, chunks, never_joined):
+    field = np.round(smooth_random_field((14, 12, 10), np.random.default_rng(9), sigma=0.5)
+                     * 20)                                   # plateaus and tied saddles
+    report = _cut_both(_both(field, chunks), CutRequest.checked(measure="persistence", **asked))
+    assert report.n_maxima > 100
+
+
+@pytest.mark.parametrize("connectivity", [6, pytest.param(26, marks=pytest.mark.slow)])
+def test_ties_everywhere_and_a_mask_of_several_components(connectivity, never_joined):
+    rng = np.random.default_rng(4)
+    field = rng.integers(0, 4, size=(12, 11, 10)).astype(float)
+    mask = np.zeros(field.shape, bool)
+    mask[1:5, 1:9, 2:8] = True                 # three components, one a voxel thick
+    mask[7:11, 2:10, 1:9] = True
+    mask[6, 0:3, 9] = True
+    both = _both(field, (2, 3, 2), mask, connectivity)
+    # None dropped, the thin one, all but the largest; counts below and above them all.
+    cases = [(asked, share) for asked in (dict(n_regions=4), dict(n_regions="auto"),
+                                          dict(min_persistence=1.0))
+             for share in (0.0, 0.05, 0.45)] + [(dict(n_regions=1), 0.45),
+                                                (dict(n_regions=300), 0.05)]
+    for asked, share in cases:
+        cut = CutRequest.checked(measure="persistence", min_component=share, **asked)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")         # fewer components than asked
+            report = _cut_both(both, cut)
+        assert report.n_components == (3 if connectivity == 6 else 2)   # diagonal touch
+        assert report.curve.n_components == {0.0: report.n_components, 0.05: 2,
+                                             0.45: 1}[share]
+
+
+def test_counts_that_cannot_be_met_warn_as_in_memory(never_joined):
+    field = np.round(smooth_random_field((12, 12, 12), np.random.default_rng(2), sigma=1.0)
+                     * 10)
+    mask = np.ones(field.shape, bool)
+    mask[:, 6, :] = False                       # two components
+    both = _both(field, 5, mask)
+    for n_regions, words in ((10**5, "only"), (1, "connected components")):
+        cut = CutRequest.checked(n_regions=n_regions, measure="persistence")
+        with pytest.warns(UserWarning, match=words):
+            _cut_both(both, cut)
+
+
+def test_the_cuts_that_need_the_whole_hierarchy_still_join_it():
+    field = smooth_random_field((16, 16, 16), np.random.default_rng(3), sigma=1.0)
+    mask = field > np.quantile(field, 0.1)
+    lazy = descending_complex(da.from_array(field, chunks=8), mask=mask, on_workers=True)
+    for cut in (CutRequest.checked(n_regions=5, measure="hypervolume"),
+                CutRequest.checked(n_regions=10**6, measure="persistence")):
+        assert not in_buckets(lazy, cut)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        labels, report = cut_of(lazy, CutRequest.checked(n_regions=5, measure="size"))
+    expected, expected_report = cut_of(descending_complex(field, mask=mask),
+                                       CutRequest.checked(n_regions=5, measure="size"))
+    assert np.array_equal(np.asarray(labels), expected)
+    assert_same_report(report, expected_report)
+
+
+def _chain_buckets(n, sizes, rng):
+    """Buckets of `sizes` over n maxima, each maximum i > 0 dying into a random higher
+    maximum (a forest whose every tree has its lowest id as root), persistence random."""
+    target = np.array([-1] + [int(rng.integers(0, i)) for i in range(1, n)])
+    values = np.sort(rng.random(n))[::-1] + 1.0
+    saddle_value = values - rng.random(n)
+    firsts = np.concatenate([[0], np.cumsum(sizes)])
+    buckets = []
+    for j in range(len(sizes)):
+        s = slice(firsts[j], firsts[j + 1])
+        buckets.append(_buckets.Bucket(int(firsts[j]), np.arange(n)[s], values[s], target[s],
+                                       target[s], np.arange(n)[s], saddle_value[s]))
+    return buckets, firsts, target, values - saddle_value
+
+
+@pytest.mark.parametrize("threshold", [0.0, 0.3, 0.9, 2.0])
+def test_pointer_jumping_across_buckets_gives_the_union_find_regions(threshold):
+    # Long chains that cross buckets back and forth: several rounds, each maximum's
+    # region that of the compiled union-find on the merged events.
+    rng = np.random.default_rng(11)
+    n = 400
+    buckets, firsts, target, persistence = _chain_buckets(n, [1, 0, 57, 3, 200, 139], rng)
+    delayed = [dask.delayed(b) for b in buckets]
+    rounds = []
+    hooks = _hooks(rounds)
+    states = _bucket_cut.regions(delayed, dask.delayed(firsts), ("below", threshold), hooks)
+    got = np.concatenate([s.compute().pointer for s in states])
+    young = np.arange(1, n)
+    expected = np.empty(n, np.int32)
+    _kernels.regions_of_cut(young, target[1:], persistence[1:] < threshold, expected)
+    assert np.array_equal(got, expected)
+    if threshold == 2.0:                       # everything merged: one region, and
+        assert got.max() == 0 and len(rounds) >= 3     # chains crossed buckets
+
+
+def _hooks(rounds):
+    from volseg._block_hooks import BlockHooks
+
+    def persist(*collections, stage, hierarchy=False):
+        if "round" in stage:
+            rounds.append(stage)
+        return dask.persist(*collections)
+    return BlockHooks(persist=persist)
+
+
+def test_no_bucket_holds_most_of_the_maxima(never_joined):
+    # The sample sort's buckets share the maxima: with many blocks, none holds a
+    # quarter of them, and nothing the client receives is that long but the curve.
+    field = smooth_random_field((40, 40, 40), np.random.default_rng(9), sigma=1.0)
+    received = []
+    lazy = descending_complex(da.from_array(field, chunks=10), on_workers=True,
+                              block_hooks=recording(received))
+    buckets = dask.compute(*lazy.buckets)
+    assert len(buckets) == 32 and sum(len(b) for b in buckets) == lazy.n_maxima > 1000
+    assert max(len(b) for b in buckets) < lazy.n_maxima / 4
+    cut = CutRequest.checked(n_regions="auto", measure="persistence")
+    labels, report = cut_of(lazy, cut)
+    arrays = [a for a in _arrays(received) if len(a) != len(report.curve)]
+    assert max(len(a) for a in arrays) < lazy.n_maxima / 4
+    expected, expected_report = cut_of(descending_complex(field), cut)
+    assert np.array_equal(np.asarray(labels), expected)
+    assert_same_report(report, expected_report)         # the head shorter than the events
+
