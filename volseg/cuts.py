@@ -58,8 +58,8 @@ def cut_of(hierarchy, cut, out=None) -> tuple:
 
 
 #: The largest region count a blockwise cut chooses from the buckets' heads (each
-#: bucket sends its count + 1 largest persistences to the client); above it the cut
-#: runs where the hierarchy is joined.
+#: bucket sends its count + 1 largest persistences to the task that merges them);
+#: above it the cut runs where the hierarchy is joined.
 MAX_COUNT_IN_BUCKETS = 100_000
 
 

@@ -188,3 +188,13 @@ def test_no_bucket_holds_most_of_the_maxima(never_joined):
     assert np.array_equal(np.asarray(labels), expected)
     assert_same_report(report, expected_report)         # the head shorter than the events
 
+
+
+def test_buckets_grow_past_2048_cubed_so_each_stays_small():
+    from volseg.morse import _blocks
+
+    assert _blocks._bucket_count(5, 10**6) == 5                 # never more than blocks
+    assert _blocks._bucket_count(512, 1024**3) == 32
+    assert _blocks._bucket_count(4096, 2048**3) == 32
+    assert _blocks._bucket_count(32768, 4096**3) == 256          # 17 M maxima at most each
+    assert 4096**3 * 0.064 / 256 * 40 < 0.75 * 2**30

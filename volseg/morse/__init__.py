@@ -10,6 +10,8 @@ fields. The package:
 - `_build`: the in-memory build (`descending_complex`), `_edges` and `_kernels` its
   cross-cell edges and compiled passes;
 - `_blocks` (with `_block_kernels`): the same build on a Dask array, block by block;
+  `_buckets` its hierarchy in buckets of maximum ids on the workers, `_bucket_cut` a
+  persistence cut there (no process holds every maximum);
 - `_hierarchy`: `MorseHierarchy`, every cut of it without recomputation;
 - `_measures` and `_prune`: the size measures of DESIGN.md section 12 (per-cell sizes
   and hypervolumes, the Carr et al. pruning over the merge events).

@@ -2,8 +2,8 @@
 every maximum or event (issue 30).
 
 1. `head`: each bucket's events by decreasing persistence (ties: the lower young id)
-   up to a length, and its counts, merged on the client: what a count or ``auto`` cut
-   reads and the report's listed persistences, O(buckets x the regions asked).
+   up to a length, and its counts, merged in a task: what a count or ``auto`` cut
+   reads and the report's listed persistences, O(the regions asked) to the client.
 2. A rule marks the merged events: persistence below a threshold, or after the
    count's last kept event in that order (as `_hierarchy._all_but_most_persistent`).
    Each merged maximum points to its target; the others are roots. A persistence cut
@@ -228,12 +228,13 @@ def regions(buckets: list, firsts, rule, hooks, dropped=None) -> list:
 
 
 def heads(buckets: list, length: int, hooks, dropped=None) -> Head:
-    """Step 1: the buckets' `Head`s of at most `length` events, merged on the client."""
+    """Step 1: the buckets' `Head`s of at most `length` events, merged in a task: the
+    client receives one `Head`."""
     graph = TaskGraph("morse-cut-head", [*buckets, *(dropped or ())])
-    parts = hooks.compute(*graph.delayed([graph(head_of, b.key, length, _key(dropped, j))
-                                          for j, b in enumerate(buckets)]),
+    parts = [graph(head_of, b.key, length, _key(dropped, j)) for j, b in enumerate(buckets)]
+    head, = hooks.compute(*graph.delayed([graph(merged_heads, parts, length)]),
                           stage="Morse: the events' largest persistences")
-    return merged_heads(parts, length)
+    return head
 
 
 def _key(delayed_list, j):
