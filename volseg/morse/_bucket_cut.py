@@ -27,7 +27,7 @@ import numpy as np
 
 from .._task_graph import TaskGraph
 from . import _ranks
-from ._buckets import Bucket, first_ids, owner
+from ._buckets import Bucket, by_bucket, first_ids
 from ._hierarchy import events_kept, midpoint_threshold, widest_gap_count
 
 __all__ = []
@@ -177,9 +177,7 @@ def _inside(state: Pointers) -> Pointers:
 def asked(state: Pointers, firsts) -> list:
     """What the bucket asks each bucket: the sorted distinct maxima its unknown
     pointers lead to, split by their bucket."""
-    ids = np.unique(state.pointer[~state.known])
-    bounds = np.searchsorted(owner(firsts, ids), np.arange(len(firsts)))
-    return [ids[bounds[k]:bounds[k + 1]] for k in range(len(firsts) - 1)]
+    return by_bucket(firsts, np.unique(state.pointer[~state.known]))
 
 
 def answers(state: Pointers, questions: list) -> list:
@@ -269,9 +267,7 @@ def batch_sizes(firsts, id_blocks: list, count_blocks: list) -> list:
     counts = np.concatenate([b.flat[0] for b in count_blocks])
     distinct, where = np.unique(ids, return_inverse=True)
     sums = np.bincount(where, weights=counts, minlength=len(distinct)).astype(np.int64)
-    bounds = np.searchsorted(owner(firsts, distinct), np.arange(len(firsts)))
-    return [(distinct[bounds[k]:bounds[k + 1]], sums[bounds[k]:bounds[k + 1]])
-            for k in range(len(firsts) - 1)]
+    return by_bucket(firsts, distinct, sums)
 
 
 def component_sizes(components: Pointers, pieces: list) -> tuple:
@@ -318,9 +314,7 @@ def batch_questions(firsts, blocks: list) -> tuple:
     them, each block's cell count)."""
     ids = [b.flat[0] for b in blocks]
     distinct, where = np.unique(np.concatenate(ids), return_inverse=True)
-    bounds = np.searchsorted(owner(firsts, distinct), np.arange(len(firsts)))
-    return ([distinct[bounds[k]:bounds[k + 1]] for k in range(len(firsts) - 1)], where,
-            [len(i) for i in ids])
+    return by_bucket(firsts, distinct), where, [len(i) for i in ids]
 
 
 def labels_of(state: Pointers, questions: list) -> list:

@@ -86,15 +86,21 @@ def owner(firsts, ids) -> np.ndarray:
     return np.searchsorted(firsts, ids, side="right") - 1
 
 
+def by_bucket(firsts, ids, *columns) -> list:
+    """Sorted maximum `ids` (and `columns` aligned with them) split by bucket: a list of
+    ``ids`` slices, or of ``(ids, *columns)`` tuples, one per bucket."""
+    bounds = np.searchsorted(owner(firsts, ids), np.arange(len(firsts)))
+    out = [tuple(c[bounds[k]:bounds[k + 1]] for c in (ids, *columns))
+           for k in range(len(firsts) - 1)]
+    return out if columns else [o[0] for o in out]
+
+
 def split(firsts, decided: list) -> list:
     """Events of some groups (`decided`), by the bucket of their young maximum: a list
     of (young, target, source, saddle, saddle value) per bucket."""
     columns = [np.concatenate([d[k] for d in decided]) for k in range(5)]
-    which = owner(firsts, columns[0])
-    order = np.argsort(which, kind="stable")
-    bounds = np.searchsorted(which[order], np.arange(len(firsts)))
-    columns = [c[order] for c in columns]
-    return [tuple(c[bounds[j]:bounds[j + 1]] for c in columns) for j in range(len(firsts) - 1)]
+    order = np.argsort(columns[0], kind="stable")
+    return by_bucket(firsts, *(c[order] for c in columns))
 
 
 def bucket(maxima, firsts, j: int, pieces: list, id_type) -> Bucket:
