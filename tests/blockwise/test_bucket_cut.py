@@ -198,3 +198,13 @@ def test_buckets_grow_past_2048_cubed_so_each_stays_small():
     assert _blocks._bucket_count(4096, 2048**3) == 32
     assert _blocks._bucket_count(32768, 4096**3) == 256          # 17 M maxima at most each
     assert 4096**3 * 0.064 / 256 * 40 < 0.75 * 2**30
+
+
+def test_a_thinned_curve_is_sampled_at_the_same_ranks(never_joined):
+    # Over `EXACT` positive persistences the curve is thinned: the buckets' sample sort
+    # picks the same ranks and values as the in-memory sort.
+    from volseg.morse._curve import EXACT
+
+    field = smooth_random_field((48, 48, 48), np.random.default_rng(2), sigma=0.4)
+    report = _cut_both(_both(field, 12), CutRequest.checked(min_persistence=0.01))
+    assert report.curve.n_positive > EXACT and len(report.curve) < report.curve.n_positive
