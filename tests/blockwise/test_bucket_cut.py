@@ -119,10 +119,13 @@ def test_the_cuts_that_need_the_whole_hierarchy_still_join_it():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         labels, report = cut_of(lazy, CutRequest.checked(n_regions=5, measure="size"))
-    expected, expected_report = cut_of(descending_complex(field, mask=mask),
-                                       CutRequest.checked(n_regions=5, measure="size"))
+    whole = descending_complex(field, mask=mask)
+    expected, expected_report = cut_of(whole, CutRequest.checked(n_regions=5, measure="size"))
     assert np.array_equal(np.asarray(labels), expected)
     assert_same_report(report, expected_report)
+    # The hierarchy joined for that cut is the one a caller reads (`fetch`).
+    assert lazy._joined is not None and np.array_equal(lazy.maxima, whole.maxima)
+    assert np.array_equal(lazy.young, whole.young)
 
 
 def _chain_buckets(n, sizes, rng):

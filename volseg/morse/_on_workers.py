@@ -65,8 +65,8 @@ class HierarchyOnWorkers:
     def fetch(self) -> MorseHierarchy:
         """The whole hierarchy on the client (computed once)."""
         if self._fetched is None:
-            core, = self.hooks.compute(self._joined or self.core,
-                                       stage="Morse: the hierarchy, to the client")
+            joined = self.core if self._joined is None else self._joined
+            core, = self.hooks.compute(joined, stage="Morse: the hierarchy, to the client")
             self._fetched = dataclasses.replace(
                 core, cells=self.cells, mask=self.mask, _field=self._field,
                 _connectivity=self._connectivity, timings=self.timings,
