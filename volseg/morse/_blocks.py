@@ -45,7 +45,7 @@ import numpy as np
 from .. import _atomic
 from .._block_hooks import BlockHooks
 from .._halo import block_starts, with_halo
-from .._task_graph import TaskGraph
+from .._task_graph import TaskGraph, _one_object
 from . import _block_kernels as kernels
 from . import _buckets, _exits, _group_tree, _kernels, _measures, _ranks
 from ._block_objects import only, per_block
@@ -347,7 +347,7 @@ def _ids_and_exits(ascent, grid: _Grid, hooks) -> tuple:
                 answers[child] = graph(_exits.answers_down, down[index], halves[index],
                                        answers[index], half)
     leaves = {groups[i][0]: answers[i] for i in range(len(groups)) if groups[i][2] is None}
-    tables = [graph(_one_block, graph(_exits.table, ranks[i], leaves[i])) for i in order]
+    tables = [graph(_one_object, graph(_exits.table, ranks[i], leaves[i]), 3) for i in order]
     low_high = graph(_measures.range_of,
                      *[graph(operator.itemgetter(4), summaries[i]) for i in order])
     n_buckets = len(buckets)
@@ -372,13 +372,6 @@ def _split_last(items, n: int) -> tuple:
 
 def _no_answers():
     return np.zeros(0, np.int64), np.zeros(0, np.int64)
-
-
-def _one_block(item):
-    """`item` as the one element of a 1x1x1 object block."""
-    out = np.empty((1, 1, 1), dtype=object)
-    out[0, 0, 0] = item
-    return out
 
 
 def _maxima_of(summary):

@@ -27,7 +27,7 @@ import numpy as np
 
 from .._task_graph import TaskGraph
 from . import _ranks
-from ._buckets import Bucket, by_bucket, first_ids
+from ._buckets import Bucket, batches, by_bucket, first_ids
 from ._hierarchy import events_kept, midpoint_threshold, widest_gap_count
 
 __all__ = []
@@ -248,11 +248,9 @@ def dropped_maxima(buckets: list, firsts, ids, counts, min_share: float, hooks) 
     (O(components))."""
     components = regions(buckets, firsts, ("all",), hooks)
     graph = TaskGraph("morse-cut-components", [*components, firsts, ids, counts])
-    blocks = list(np.ndindex(ids.numblocks))
-    batch = -(-len(blocks) // len(buckets))
-    pieces = [graph(batch_sizes, firsts.key, [(ids.name, *b) for b in blocks[i:i + batch]],
-                    [(counts.name, *b) for b in blocks[i:i + batch]])
-              for i in range(0, len(blocks), batch)]
+    pieces = [graph(batch_sizes, firsts.key, [(ids.name, *b) for b in part],
+                    [(counts.name, *b) for b in part])
+              for part in batches(list(np.ndindex(ids.numblocks)), len(buckets))]
     sizes = [graph(component_sizes, c.key, [graph.item(p, j) for p in pieces])
              for j, c in enumerate(components)]
     small = graph(small_components, sizes, min_share)
@@ -295,15 +293,13 @@ def block_labels(states: list, firsts, ids):
     """Step 4, lazy: each block's labels (region + 1) aligned with its distinct cells
     `ids` (`_block_cells.block_cells`), as an object array of the block grid."""
     graph = TaskGraph("morse-cut-labels", [*states, firsts, ids])
-    blocks = list(np.ndindex(ids.numblocks))
-    batch = -(-len(blocks) // len(states))
-    batches = [blocks[i:i + batch] for i in range(0, len(blocks), batch)]
+    parts = batches(list(np.ndindex(ids.numblocks)), len(states))
     questions = [graph(batch_questions, firsts.key, [(ids.name, *b) for b in part])
-                 for part in batches]
+                 for part in parts]
     replies = [graph(labels_of, s.key, [graph.item(graph.item(q, 0), j) for q in questions])
                for j, s in enumerate(states)]
     out = {}
-    for i, part in enumerate(batches):
+    for i, part in enumerate(parts):
         labels = graph(batch_labels, questions[i], [graph.item(r, i) for r in replies])
         out.update({b: graph.item(labels, k) for k, b in enumerate(part)})
     return graph.object_array(out, ids.numblocks)

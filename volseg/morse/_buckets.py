@@ -68,13 +68,18 @@ def bucketed(sorted_buckets: list, decided: list, id_type) -> tuple:
     saddle value)), one lazy graph."""
     graph = TaskGraph("morse-buckets", [*sorted_buckets, *decided])
     firsts = graph(first_ids, [graph(len, graph.item(b.key, 0)) for b in sorted_buckets])
-    n = len(sorted_buckets)
-    batch = -(-len(decided) // n)
-    splits = [graph(split, firsts, [d.key for d in decided[i:i + batch]])
-              for i in range(0, len(decided), batch)]
+    splits = [graph(split, firsts, [d.key for d in part])
+              for part in batches(decided, len(sorted_buckets))]
     buckets = [graph(bucket, b.key, firsts, j, [graph.item(s, j) for s in splits], id_type)
                for j, b in enumerate(sorted_buckets)]
     return graph.delayed(buckets), graph.delayed([firsts])[0]
+
+
+def batches(items: list, n_buckets: int) -> list:
+    """`items` (the groups, the blocks) in consecutive batches, about one per bucket,
+    so that an exchange with the buckets is about buckets^2 pieces."""
+    size = -(-len(items) // n_buckets)
+    return [items[i:i + size] for i in range(0, len(items), size)]
 
 
 def first_ids(lengths) -> np.ndarray:
