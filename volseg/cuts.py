@@ -65,25 +65,28 @@ MAX_COUNT_IN_BUCKETS = 100_000
 
 def in_buckets(hierarchy, cut) -> bool:
     """Whether the cut of a blockwise `hierarchy` runs where its buckets are, joining
-    no maximum (`volseg.morse.HierarchyOnWorkers.cut_in_buckets`): a persistence cut
-    of at most `MAX_COUNT_IN_BUCKETS` regions."""
-    return (hierarchy.buckets is not None and cut.measure == "persistence"
-            and cut.ranks_read <= MAX_COUNT_IN_BUCKETS + 1)
+    no maximum (`volseg.morse.HierarchyOnWorkers.cut_in_buckets`): a cut of at most
+    `MAX_COUNT_IN_BUCKETS` regions, by persistence or by a size measure with no
+    per-vertex weight."""
+    return (hierarchy.buckets is not None and cut.ranks_read <= MAX_COUNT_IN_BUCKETS + 1
+            and (cut.measure == "persistence" or np.ndim(hierarchy.vertex_weight) == 0))
 
 
 def _cut_in_buckets(hierarchy, cut, masked: bool) -> tuple:
     min_component = cut.min_component if masked else 0.0
     dropped = hierarchy.dropped_components(min_component) if min_component > 0 else None
-    head = hierarchy.head(max(LISTED_PERSISTENCES, cut.ranks_read), dropped)
-    listed = head if dropped is None else hierarchy.head(LISTED_PERSISTENCES)
+    merges = None if cut.measure == "persistence" else hierarchy.pruned_in_buckets(cut.measure)
+    head = hierarchy.head(max(LISTED_PERSISTENCES, cut.ranks_read), dropped, merges)
+    listed = (head if dropped is None and merges is None
+              else hierarchy.head(LISTED_PERSISTENCES))
     asked = cut.of(head, masked)
     labels, (top_maxima, top_values, top_persistence), curve = hierarchy.cut_in_buckets(
-        head, asked["threshold"], asked["n_regions"], dropped)
+        head, asked["threshold"], asked["n_regions"], dropped, merges)
     k = len(top_maxima)
     report = CutReport(
         _record(cut, asked, k, head), k, top_maxima, top_values, top_persistence,
         listed.n_maxima, listed.n_components, listed.n_events,
-        listed.persistence[:LISTED_PERSISTENCES].copy(), curve)
+        listed.values[:LISTED_PERSISTENCES].copy(), curve)
     return labels, report
 
 

@@ -1,6 +1,6 @@
-"""A persistence cut where the blockwise hierarchy's buckets of maximum ids are
-(issue 30): labels and report exactly those of the cut in memory, for every kind of
-persistence cut, chunking, tie and mask, with no task joining every maximum."""
+"""A cut where the blockwise hierarchy's buckets of maximum ids are (issue 30): labels
+and report exactly those of the cut in memory, for every kind of cut (persistence,
+size, hypervolume), chunking, tie and mask, with no task joining every maximum."""
 
 import warnings
 
@@ -11,7 +11,7 @@ import pytest
 
 from volseg import descending_complex
 from volseg.cuts import cut_of, in_buckets
-from volseg.morse import _bucket_cut, _buckets, _kernels
+from volseg.morse import _bucket_cut, _bucket_prune, _buckets, _kernels
 from volseg.segment import CutRequest
 
 from ..conftest import smooth_random_field
@@ -73,6 +73,83 @@ def test_every_persistence_cut_equals_the_one_in_memory(asked, chunks, never_joi
     assert report.n_maxima > 100
 
 
+@pytest.fixture
+def small_leaves(monkeypatch):
+    """Leaves of 3^3 voxels: the pruning's tree of groups has many levels."""
+    monkeypatch.setattr(_bucket_prune, "MIN_LEAF_EDGE", 3)
+
+
+MEASURE_CUTS = [dict(n_regions="auto"), dict(n_regions=5), dict(n_regions=1),
+                dict(threshold=0.0), dict(threshold=25.0), dict(threshold=np.inf)]
+
+
+@pytest.mark.parametrize("measure", ["size", "hypervolume"])
+@pytest.mark.parametrize("asked", MEASURE_CUTS)
+@pytest.mark.parametrize("chunks", [(2, 3, 2), (5, 7, 4)])
+def test_every_size_measure_cut_equals_the_one_in_memory(measure, asked, chunks, never_joined,
+                                                         small_leaves):
+    field = np.round(smooth_random_field((14, 12, 10), np.random.default_rng(9), sigma=0.5)
+                     * 20)                                   # plateaus and tied saddles
+    both = _both(field, chunks)
+    edge, grid = _bucket_prune.leaf_grid(field.shape, len(both[0].buckets))
+    assert edge <= 6 and np.prod(grid) >= 8           # a tree of several levels
+    report = _cut_both(both, CutRequest.checked(measure=measure, **asked))
+    assert report.n_maxima > 100
+
+
+@pytest.mark.parametrize("measure", ["size", "hypervolume"])
+def test_size_measure_cuts_with_ties_and_dropped_components(measure, never_joined,
+                                                            small_leaves):
+    rng = np.random.default_rng(4)
+    field = rng.integers(0, 4, size=(12, 11, 10)).astype(float)     # ties everywhere
+    mask = np.zeros(field.shape, bool)
+    mask[1:5, 1:9, 2:8] = True
+    mask[7:11, 2:10, 1:9] = True
+    mask[6, 0:3, 9] = True
+    both = _both(field, (2, 3, 2), mask, 6)
+    for asked, share in [(dict(n_regions=4), 0.0), (dict(n_regions="auto"), 0.05),
+                         (dict(threshold=3.0), 0.45), (dict(n_regions=300), 0.05)]:
+        cut = CutRequest.checked(measure=measure, min_component=share, **asked)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")         # more regions than maxima
+            report = _cut_both(both, cut)
+        assert report.curve.n_components == {0.0: 3, 0.05: 2, 0.45: 1}[share]
+
+
+def test_the_merges_ids_are_the_sequential_prunings(small_leaves):
+    """Each merge's two region ids, decided in groups, are those the sequential pruning
+    gives them (a group's own union-find would name the other side by whatever its
+    children merged into it first)."""
+    field = smooth_random_field((16, 14, 12), np.random.default_rng(5), sigma=0.5)
+    lazy, whole = _both(field, (4, 5, 6))
+    for measure in ("size", "hypervolume"):
+        merges = dask.compute(*lazy.pruned_in_buckets(measure))
+        target = np.concatenate([m.target for m in merges])
+        order, extinction, _ = whole._pruning(measure)
+        parent, expected = np.arange(len(whole.maxima)), np.full(len(whole.maxima), -1)
+        for e in order:                               # the sequential pruning's ids
+            a, b = (_kernels_root(parent, c) for c in (whole.source[e], whole.target[e]))
+            parent[max(a, b)] = expected[max(a, b)] = min(a, b)
+        assert np.array_equal(target, expected)
+        extinction_of = np.concatenate([m.extinction() for m in merges])
+        gone = expected >= 0
+        assert np.array_equal(np.sort(extinction_of[gone]), np.sort(extinction))
+
+
+def _kernels_root(parent, x):
+    while parent[x] != x:
+        x = parent[x]
+    return x
+
+
+def test_leaves_double_until_about_two_per_bucket():
+    assert _bucket_prune.leaf_grid((1024,) * 3, 32) == (256, (4, 4, 4))
+    assert _bucket_prune.leaf_grid((4096,) * 3, 256) == (512, (8, 8, 8))
+    assert _bucket_prune.leaf_grid((100, 30, 20), 1) == (64, (2, 1, 1))
+    assert _bucket_prune.leaf_grid((10, 10, 10), 4, 2) == (8, (2, 2, 2))
+    assert _bucket_prune.leaf_grid((10, 10, 10), 1, 2) == (16, (1, 1, 1))
+
+
 @pytest.mark.parametrize("connectivity", [6, pytest.param(26, marks=pytest.mark.slow)])
 def test_ties_everywhere_and_a_mask_of_several_components(connectivity, never_joined):
     rng = np.random.default_rng(4)
@@ -113,14 +190,15 @@ def test_the_cuts_that_need_the_whole_hierarchy_still_join_it():
     field = smooth_random_field((16, 16, 16), np.random.default_rng(3), sigma=1.0)
     mask = field > np.quantile(field, 0.1)
     lazy = descending_complex(da.from_array(field, chunks=8), mask=mask, on_workers=True)
-    for cut in (CutRequest.checked(n_regions=5, measure="hypervolume"),
-                CutRequest.checked(n_regions=10**6, measure="persistence")):
-        assert not in_buckets(lazy, cut)
+    for measure in ("persistence", "size", "hypervolume"):
+        assert in_buckets(lazy, CutRequest.checked(n_regions=10**5, measure=measure))
+        assert not in_buckets(lazy, CutRequest.checked(n_regions=10**5 + 1, measure=measure))
+    cut = CutRequest.checked(n_regions=10**6, measure="size")
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        labels, report = cut_of(lazy, CutRequest.checked(n_regions=5, measure="size"))
-    whole = descending_complex(field, mask=mask)
-    expected, expected_report = cut_of(whole, CutRequest.checked(n_regions=5, measure="size"))
+        warnings.simplefilter("ignore")         # more regions than maxima
+        labels, report = cut_of(lazy, cut)
+        whole = descending_complex(field, mask=mask)
+        expected, expected_report = cut_of(whole, cut)
     assert np.array_equal(np.asarray(labels), expected)
     assert_same_report(report, expected_report)
     # The hierarchy joined for that cut is the one a caller reads (`fetch`).

@@ -247,7 +247,8 @@ def test_the_hierarchy_is_joined_and_cut_on_the_worker_given_for_it():
     from volseg.segment import CutRequest
 
     field = smooth_random_field((24, 24, 24), np.random.default_rng(5), sigma=1.5)
-    cut = CutRequest.checked(n_regions=6, measure="hypervolume")
+    # A count past what the buckets' heads hold: the hierarchy is joined for it.
+    cut = CutRequest.checked(n_regions=10**5 + 1, measure="hypervolume")
     with engine_module.Engine("local", workers=1, memory_limit="1GiB",
                               hierarchy_memory="700MiB") as engine:
         info = engine.client.scheduler_info()["workers"]
@@ -258,7 +259,7 @@ def test_the_hierarchy_is_joined_and_cut_on_the_worker_given_for_it():
         hooks = BlockHooks(compute=engine.compute, persist=engine.persist)
         lazy = descending_complex(da.from_array(field, chunks=8), on_workers=True,
                                   block_hooks=hooks)
-        labels, report = cut_of(lazy, cut)
+        labels, report = cut_of(lazy, cut)      # warns on the worker: more than the maxima
         # Not there by chance: the scheduler was told to run them nowhere else, and
         # nothing else there (the blocks' sums, each reading a block, go anywhere).
         # (Asked before the labels: a later graph naming a finished task drops its
@@ -277,15 +278,17 @@ def test_the_hierarchy_is_joined_and_cut_on_the_worker_given_for_it():
         # each block, is let go.
         held = {key_split(k): v for k, v in engine.client.who_has().items() if v}
         assert set(held["joined"]) == big and "run" not in held, held
-    expected, expected_report = cut_of(descending_complex(field), cut)
+    with pytest.warns(UserWarning, match="only"):           # more regions than maxima
+        expected, expected_report = cut_of(descending_complex(field), cut)
     assert np.array_equal(labels, expected) and report.n_regions == expected_report.n_regions
 
 
 @pytest.mark.slow
-def test_a_persistence_cut_on_a_cluster_joins_no_hierarchy():
-    """The scheduler's accounting of every task result of a blockwise persistence cut,
-    small components dropped, on two worker processes (issue 30): no task joins the
-    events (`joined`), none
+@pytest.mark.parametrize("measure", ["persistence", "hypervolume"])
+def test_a_cut_on_a_cluster_joins_no_hierarchy(measure, monkeypatch):
+    """The scheduler's accounting of every task result of a blockwise cut (by
+    persistence, or by hypervolume pruned in a tree of 125 leaves), small components
+    dropped, on two worker processes (issue 30): no task joins the events (`joined`), none
     holds a quarter of the maxima's and events' bytes (40 B each, as the buckets keep
     them), and the cut runs on none of them in particular (no restriction). The labels
     and the report are those of the cut in memory."""
@@ -295,7 +298,7 @@ def test_a_persistence_cut_on_a_cluster_joins_no_hierarchy():
 
     from volseg._block_hooks import BlockHooks
     from volseg.cuts import cut_of
-    from volseg.morse import descending_complex
+    from volseg.morse import _bucket_prune, descending_complex
     from volseg.segment import CutRequest
 
     class Largest(SchedulerPlugin):
@@ -312,7 +315,8 @@ def test_a_persistence_cut_on_a_cluster_joins_no_hierarchy():
     # A noisy field: its maxima's bytes well above a group's faces' (O(N^2)).
     field = smooth_random_field((40, 40, 40), np.random.default_rng(9), sigma=0.5)
     mask = field > np.quantile(field, 0.3)          # many components, the small ones dropped
-    cut = CutRequest.checked(n_regions="auto", measure="persistence", min_component=0.01)
+    cut = CutRequest.checked(n_regions="auto", measure=measure, min_component=0.01)
+    monkeypatch.setattr(_bucket_prune, "MIN_LEAF_EDGE", 8)
     with engine_module.Engine("local", workers=2, memory_limit="2GiB") as engine:
         largest = Largest()
         largest.scheduler = engine.client.cluster.scheduler     # in this process
@@ -327,6 +331,7 @@ def test_a_persistence_cut_on_a_cluster_joins_no_hierarchy():
     sizes, names = largest.largest, largest.names
     assert lazy.n_maxima > 3000 and not restricted
     assert "joined" not in names and "volseg-morse-buckets" in names, names
+    assert (measure == "hypervolume") == ("volseg-morse-prune" in names)
     whole = 40 * lazy.n_maxima
     sizes.pop("finalize-hlgfinalizecompute")      # this test's own gather of the labels
     assert max(sizes.values()) < whole / 4, sorted(sizes.items(), key=lambda i: -i[1])[:5]

@@ -1,5 +1,7 @@
-"""A persistence cut where the hierarchy's buckets are (`_buckets`): no process holds
-every maximum or event (issue 30).
+"""A cut where the hierarchy's buckets are (`_buckets`): no process holds every maximum
+or event (issue 30). Written for persistence below; a size measure's cut runs the same
+steps on its pruning's `_bucket_prune.Merges` (each maximum's merge into a smaller
+region id, ordered by extinction) in place of the buckets' events.
 
 1. `head`: each bucket's events by decreasing persistence (ties: the lower young id)
    up to a length, and its counts, merged in a task: what a count or ``auto`` cut
@@ -39,86 +41,95 @@ MAX_ROUNDS = 64
 
 @dataclass(frozen=True)
 class Head:
-    """The events a cut reads by decreasing persistence, ties the lower young id first:
-    the first `persistence` and `young` of `n_events`; `n_components` that never merge;
-    `n_maxima` (all); `n_positive` events of persistence above 0. Without the
-    components that `min_component` drops when made with them (`head_of`). Answers
-    what `volseg.segment.CutRequest.of` asks of a hierarchy for a persistence cut."""
+    """The events a cut reads, last merged first: the first `values` (extinctions),
+    `keys` (the order's exact key: the extinction, in fixed point for a size measure)
+    and `ties` of `n_events`, by decreasing key, ties the lower `ties` first (the young
+    maximum for persistence, the pruned region for a size measure); `n_components`
+    that never merge; `n_maxima` (all); `n_positive` events of extinction above 0.
+    Without the components that `min_component` drops when made with them
+    (`head_of`). Answers what `volseg.segment.CutRequest.of` asks of a hierarchy for
+    a cut by its `measure`."""
 
+    measure: str
     n_maxima: int
     n_events: int
     n_components: int
     n_positive: int
-    persistence: np.ndarray
-    young: np.ndarray
+    values: np.ndarray
+    keys: np.ndarray
+    ties: np.ndarray
 
     def _enough(self, rank: int):
-        if rank >= len(self.persistence) and len(self.persistence) < self.n_events:
-            raise ValueError(f"the head holds {len(self.persistence)} events; rank {rank} "
+        if rank >= len(self.values) and len(self.values) < self.n_events:
+            raise ValueError(f"the head holds {len(self.values)} events; rank {rank} "
                              "was asked")
 
+    def _same(self, measure):
+        if measure != self.measure:
+            raise ValueError(f"this head orders the events by {self.measure}, not {measure!r}")
+
     def largest_gap(self, region_range, measure="persistence", min_component=0.0) -> int:
-        _persistence_only(measure)
+        self._same(measure)
         self._enough(region_range[1])
-        return widest_gap_count(self.persistence, self.n_events, self.n_components,
+        return widest_gap_count(self.values, self.n_events, self.n_components,
                                 region_range, self.n_maxima)
 
     def threshold_for(self, n_regions, measure="persistence", min_component=0.0) -> float:
-        _persistence_only(measure)
+        self._same(measure)
         self._enough(n_regions)
-        return midpoint_threshold(self.persistence, self.n_events, self.n_components, n_regions)
+        return midpoint_threshold(self.values, self.n_events, self.n_components, n_regions)
 
 
-def _persistence_only(measure):
-    if measure != "persistence":
-        raise ValueError(f"a cut in buckets is by persistence, not {measure!r}")
-
-
-def head_of(bucket: Bucket, length: int, dropped=None) -> Head:
-    """A bucket's `Head` of at most `length` events, without the maxima `dropped`."""
-    kept = np.ones(len(bucket), dtype=bool) if dropped is None else ~dropped
-    p = bucket.persistence()
-    young = np.flatnonzero(bucket.dies & kept)
-    p, young = p[young], young + bucket.first
-    order = np.lexsort((young, -p))[:length]
-    return Head(len(bucket), len(p), int(np.count_nonzero(~bucket.dies & kept)),
-                int(np.count_nonzero(p > 0)), p[order], young[order])
+def head_of(merges, length: int, dropped=None) -> Head:
+    """A bucket's `Head` of at most `length` events, without the maxima `dropped`.
+    `merges`: a `_buckets.Bucket` (persistence) or a `_bucket_prune.Merges`: how each
+    of its maxima merges (``dies``, ``extinction()``, ``order()``)."""
+    kept = np.ones(len(merges), dtype=bool) if dropped is None else ~dropped
+    at = np.flatnonzero(merges.dies & kept)
+    value = merges.extinction()[at]
+    key, tie = (c[at] for c in merges.order())
+    order = np.lexsort((tie, -key))[:length]
+    return Head(merges.measure, len(merges), len(at),
+                int(np.count_nonzero(~merges.dies & kept)), int(np.count_nonzero(value > 0)),
+                value[order], key[order], tie[order])
 
 
 def merged_heads(heads, length: int) -> Head:
     """The buckets' heads as one `Head` of at most `length` events."""
-    p = np.concatenate([h.persistence for h in heads])
-    young = np.concatenate([h.young for h in heads])
-    order = np.lexsort((young, -p))[:length]
-    return Head(*(sum(getattr(h, name) for h in heads)
+    key, tie = (np.concatenate([getattr(h, c) for h in heads]) for c in ("keys", "ties"))
+    order = np.lexsort((tie, -key))[:length]
+    return Head(heads[0].measure,
+                *(sum(getattr(h, name) for h in heads)
                   for name in ("n_maxima", "n_events", "n_components", "n_positive")),
-                p[order], young[order])
+                np.concatenate([h.values for h in heads])[order], key[order], tie[order])
 
 
-def rule_of(head: Head, min_persistence=None, n_regions=None) -> tuple:
+def rule_of(head: Head, threshold=None, n_regions=None) -> tuple:
     """Which events the cut merges, as a rule a bucket applies alone (`merged`):
-    ("below", threshold), ("after", persistence, young) of the last event kept, or
-    ("all",) / ("none",). `n_regions` warns as `MorseHierarchy.segment` does."""
+    ("below", threshold), ("after", key, tie) of the last event kept, or ("all",) /
+    ("none",). `n_regions` warns as `MorseHierarchy.segment` does."""
     if n_regions is None:
-        return ("below", 0.0 if min_persistence is None else float(min_persistence))
+        return ("below", 0.0 if threshold is None else float(threshold))
     keep = events_kept(n_regions, head.n_maxima, head.n_components, stacklevel=4)
     if keep <= 0:
         return ("all",)
     if keep >= head.n_events:
         return ("none",)
     head._enough(keep - 1)
-    return ("after", float(head.persistence[keep - 1]), int(head.young[keep - 1]))
+    return ("after", head.keys[keep - 1].item(), int(head.ties[keep - 1]))
 
 
-def merged(persistence, young, rule) -> np.ndarray:
-    """True for the events (`persistence`, `young`) that `rule` merges."""
+def merged(merges, at, rule) -> np.ndarray:
+    """True for the events of the maxima `at` of a bucket's `merges` that `rule`
+    merges."""
     kind = rule[0]
     if kind == "below":
-        return persistence < rule[1]
+        return merges.extinction()[at] < rule[1]
     if kind in ("all", "none"):
-        return np.full(len(persistence), kind == "all")
-    last_p, last_young = rule[1], rule[2]
-    return ~((persistence > last_p) | ((persistence == last_p) & (young <= last_young)))
+        return np.full(len(at), kind == "all")
+    key, tie = (c[at] for c in merges.order())
+    last_key, last_tie = rule[1], rule[2]
+    return ~((key > last_key) | ((key == last_key) & (tie <= last_tie)))
 
 
 @dataclass(frozen=True)
@@ -133,20 +144,20 @@ class Pointers:
     root: np.ndarray
 
 
-def pointers(bucket: Bucket, rule, dropped=None) -> Pointers:
+def pointers(merges, rule, dropped=None) -> Pointers:
     """Step 2: each maximum's pointer, its target where merged (every event of a
     `dropped` component is), itself otherwise; a dropped component's highest maximum
-    is known at once, as region -1."""
-    ids = bucket.first + np.arange(len(bucket), dtype=np.int64)
-    dies = bucket.dies
-    joins = np.zeros(len(bucket), dtype=bool)
-    joins[dies] = merged(bucket.persistence()[dies], ids[dies], rule)
-    gone = np.zeros(len(bucket), dtype=bool) if dropped is None else dropped & ~joins
+    is known at once, as region -1. `merges` as for `head_of`."""
+    ids = merges.first + np.arange(len(merges), dtype=np.int64)
+    dies = merges.dies
+    joins = np.zeros(len(merges), dtype=bool)
+    joins[dies] = merged(merges, np.flatnonzero(dies), rule)
+    gone = np.zeros(len(merges), dtype=bool) if dropped is None else dropped & ~joins
     joins |= dies & gone
-    pointer = np.where(joins, bucket.target.astype(np.int64), ids)
+    pointer = np.where(joins, merges.target.astype(np.int64), ids)
     gone &= ~dies
     pointer[gone] = -1
-    return Pointers(bucket.first, pointer, gone, ~joins & ~gone)
+    return Pointers(merges.first, pointer, gone, ~joins & ~gone)
 
 
 def root_count(state: Pointers) -> int:
@@ -260,11 +271,13 @@ def dropped_maxima(buckets: list, firsts, ids, counts, min_share: float, hooks) 
 
 
 def batch_sizes(firsts, id_blocks: list, count_blocks: list) -> list:
-    """Some blocks' cell sizes summed per cell, split by bucket: [(ids, sizes)]."""
+    """Some blocks' cell sizes (or any int64 sums aligned with their cells) summed per
+    cell, split by bucket: [(ids, sums)]."""
     ids = np.concatenate([b.flat[0] for b in id_blocks])
     counts = np.concatenate([b.flat[0] for b in count_blocks])
     distinct, where = np.unique(ids, return_inverse=True)
-    sums = np.bincount(where, weights=counts, minlength=len(distinct)).astype(np.int64)
+    sums = np.zeros(len(distinct), dtype=np.int64)
+    np.add.at(sums, where, counts)              # int64: exact for fixed-point sums too
     return by_bucket(firsts, distinct, sums)
 
 
@@ -289,14 +302,17 @@ def _dropped(components: Pointers, small) -> np.ndarray:
     return small[components.pointer]
 
 
-def block_labels(states: list, firsts, ids):
+def block_labels(states: list, firsts, ids, reply=None, label="morse-cut-labels"):
     """Step 4, lazy: each block's labels (region + 1) aligned with its distinct cells
-    `ids` (`_block_cells.block_cells`), as an object array of the block grid."""
-    graph = TaskGraph("morse-cut-labels", [*states, firsts, ids])
+    `ids` (`_block_cells.block_cells`), as an object array of the block grid. Any other
+    per-maximum values kept in buckets the same way: ``reply(state, questions) ->
+    [values at each question's maxima]`` (default `labels_of`)."""
+    graph = TaskGraph(label, [*states, firsts, ids])
     parts = batches(list(np.ndindex(ids.numblocks)), len(states))
     questions = [graph(batch_questions, firsts.key, [(ids.name, *b) for b in part])
                  for part in parts]
-    replies = [graph(labels_of, s.key, [graph.item(graph.item(q, 0), j) for q in questions])
+    replies = [graph(reply or labels_of, s.key,
+                     [graph.item(graph.item(q, 0), j) for q in questions])
                for j, s in enumerate(states)]
     out = {}
     for i, part in enumerate(parts):
@@ -353,10 +369,10 @@ def curve_values(buckets: list, ranks, hooks, dropped=None) -> np.ndarray:
     return np.concatenate(parts) if parts else np.zeros(0)
 
 
-def _positive(bucket: Bucket, dropped=None) -> tuple:
-    p = bucket.persistence()
-    young = np.flatnonzero(bucket.dies & (p > 0) & (True if dropped is None else ~dropped))
-    return young + bucket.first, p[young]
+def _positive(merges, dropped=None) -> tuple:
+    p = merges.extinction()
+    at = np.flatnonzero(merges.dies & (p > 0) & (True if dropped is None else ~dropped))
+    return at + merges.first, p[at]
 
 
 def _picked(in_order, firsts, j: int, ranks) -> np.ndarray:

@@ -60,6 +60,17 @@ class Bucket:
         """(n,) each maximum's persistence; inf for those that never die."""
         return np.where(self.dies, self.values - self.saddle_value, np.inf)
 
+    # How a persistence cut merges the maxima (`_bucket_cut.head_of`): each one that
+    # dies into its target, ordered by its persistence, ties the lower id kept first.
+    measure = "persistence"
+
+    def extinction(self) -> np.ndarray:
+        return self.persistence()
+
+    def order(self) -> tuple:
+        """(key, tie) of each maximum's merge in the cut's order (`_bucket_cut`)."""
+        return self.persistence(), self.first + np.arange(len(self), dtype=np.int64)
+
 
 def bucketed(sorted_buckets: list, decided: list, id_type) -> tuple:
     """(a Delayed `Bucket` per bucket, a Delayed of the buckets' first ids (B + 1,)):

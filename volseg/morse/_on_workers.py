@@ -2,16 +2,16 @@
 
 The maxima and their events (about 40 bytes per maximum) stay in buckets of
 consecutive maximum ids (`_buckets`), each bucket a task's result on some worker. A
-persistence cut runs where the buckets are (`cut_in_buckets`, `_bucket_cut`, the
-components that ``min_component`` drops found there too): no task holds every
-maximum. A size measure's cut joins the buckets in one task (`core`, on
-a cluster one worker's memory, about 64 bytes per maximum) and runs in a task beside
-it (`run`): the cells' measures summed on the workers, the pruning, the region of
-every maximum and its relabelling table made there, each block sent its own cells'
-share of it (`_block_cells`: no block worker receives an array of every maximum). Either
-way only the cut's small result (O(regions) and a thinned curve) reaches the client
-(issue 30). `run` calls the same functions as in memory on a `MorseHierarchy`: one
-cut, written once.
+cut runs where the buckets are (`cut_in_buckets`, `_bucket_cut`, the components that
+``min_component`` drops found there too): by persistence directly; by size or
+hypervolume once the cells' measures are summed in the buckets and the pruning is
+decided in a tree of groups of leaves (`pruned_in_buckets`, `_bucket_prune`). No task
+holds every maximum. Only a count above `volseg.cuts.MAX_COUNT_IN_BUCKETS`, or a
+mesh's per-vertex weights, joins the buckets in one task (`core`, on a cluster one
+worker's memory, about 64 bytes per maximum) and runs the cut beside it (`run`):
+the same functions as in memory on a `MorseHierarchy`, each block sent its own
+cells' share of the result (`_block_cells`). Either way only the cut's small result
+(O(regions) and a thinned curve) reaches the client (issue 30).
 """
 
 from __future__ import annotations
@@ -23,12 +23,18 @@ import numpy as np
 
 from .._block_hooks import BlockHooks
 from . import _bucket_cut as in_buckets
+from . import _bucket_prune as pruning
+from . import _measures
 from ._block_cells import block_cells, block_counts, gathered, looked_up
+from ._block_objects import per_block
 from ._curve import CurveSample, sample_ranks
 from ._hierarchy import MorseHierarchy, checked_weight, region_table
 from ._measures import lazy_cell_measures
 
 __all__ = ["HierarchyOnWorkers"]
+
+#: Attributes of the handle itself, never looked up in the fetched hierarchy.
+_OWN = ("_fetched", "_blocks", "_joined", "_counts", "_merges")
 
 
 @dataclass(eq=False)
@@ -61,6 +67,8 @@ class HierarchyOnWorkers:
     _fetched: MorseHierarchy | None = None
     _blocks: object = None
     _joined: object = None
+    _counts: object = None
+    _merges: dict | None = None
 
     def fetch(self) -> MorseHierarchy:
         """The whole hierarchy on the client (computed once)."""
@@ -74,14 +82,14 @@ class HierarchyOnWorkers:
         return self._fetched
 
     def __getattr__(self, name):
-        if name.startswith("__") or name in ("_fetched", "_blocks", "_joined"):  # copy, pickle
+        if name.startswith("__") or name in _OWN:       # copy, pickle
             raise AttributeError(name)
         return getattr(self.fetch(), name)
 
     def with_vertex_weight(self, weight) -> HierarchyOnWorkers:
         """`MorseHierarchy.with_vertex_weight`, kept on the workers."""
         return dataclasses.replace(self, vertex_weight=checked_weight(weight, self.shape),
-                                   _fetched=None)
+                                   _fetched=None, _merges=None)
 
     def _hierarchy(self):
         """`core` persisted where the hierarchy is, once: the events joined (`_buckets.joined`)."""
@@ -124,35 +132,81 @@ class HierarchyOnWorkers:
         result, = self.hooks.compute(task[1], stage="Morse: the cut's result")
         return looked_up(self.cells, ids, regions, np.int32), result
 
-    def head(self, length: int, dropped=None) -> in_buckets.Head:
-        """The events' `Head` (`_bucket_cut`): the `length` largest persistences and the
+    def head(self, length: int, dropped=None, merges=None) -> in_buckets.Head:
+        """The events' `Head` (`_bucket_cut`): the `length` largest extinctions and the
         counts, from the buckets (nothing joined), without the maxima `dropped`
-        (`dropped_components`)."""
-        return in_buckets.heads(self.buckets, length, self.hooks, dropped)
+        (`dropped_components`); persistences, or a size measure's by its `merges`
+        (`pruned_in_buckets`)."""
+        return in_buckets.heads(self.buckets if merges is None else merges, length,
+                                self.hooks, dropped)
 
     def dropped_components(self, min_share: float) -> list:
         """Each bucket's maxima (persisted) in the components of the graph holding less
         than `min_share` of its vertices: what ``min_component`` drops."""
-        ids = self._block_cells()
-        counts, = self.hooks.persist(block_counts(self.cells),
-                                     stage="Morse: each block's cell sizes")
-        return in_buckets.dropped_maxima(self.buckets, self.firsts, ids, counts, min_share,
-                                         self.hooks)
+        return in_buckets.dropped_maxima(self.buckets, self.firsts, self._block_cells(),
+                                         self._block_counts(), min_share, self.hooks)
 
-    def cut_in_buckets(self, head: in_buckets.Head, min_persistence=None, n_regions=None,
-                       dropped=None) -> tuple:
-        """A persistence cut where the buckets are (`_bucket_cut`): no task holds every
-        maximum. Returns (lazy labels 1..k, 0 in `dropped` components, (voxel, value,
-        persistence) of each region's highest maximum, the persistences' `CurveSample`);
-        `head` from `head` with the same `dropped`, long enough for `n_regions`."""
-        rule = in_buckets.rule_of(head, min_persistence, n_regions)
-        states = in_buckets.regions(self.buckets, self.firsts, rule, self.hooks, dropped)
+    def pruned_in_buckets(self, measure: str) -> list:
+        """Each bucket's `_bucket_prune.Merges` of the pruning by `measure` (``size`` or
+        ``hypervolume``), persisted once: the cells' measures summed in the buckets, the
+        pruning decided in a tree of groups of leaves (`_bucket_prune`), no task
+        holding every maximum."""
+        if self._merges is None:
+            self._merges = {}
+        if measure not in self._merges:
+            persist = self.hooks.persist
+            ids = self._block_cells()
+            unit, sums = 1.0, self._block_counts()
+            if measure == "hypervolume":
+                low, high = self._field_range()
+                unit = _measures._unit(low, high)
+                saddles, = persist(pruning.cell_saddles(self.buckets, self.firsts, ids, low),
+                                   stage="Morse: each block's cells' saddles, from the buckets")
+                sums, = persist(pruning.block_hypervolumes(self.cells, self._field, ids,
+                                                           saddles, unit),
+                                stage="Morse: each block's cells' hypervolumes")
+            totals = persist(*pruning.summed(self.buckets, self.firsts, ids, sums,
+                                             "morse-cell-measures"),
+                             stage=f"Morse: the cells' {measure}, in the buckets")
+            weight = 1.0 if self.vertex_weight is None else float(self.vertex_weight)
+            self._merges[measure] = list(persist(*pruning.pruned(
+                self.buckets, self.firsts, totals, self.shape, weight * unit, measure),
+                stage=f"Morse: the pruning by {measure}, in a tree of groups"))
+        return self._merges[measure]
+
+    def _field_range(self) -> tuple:
+        """The field's (min, max) over the cells, as the ascent found it or computed."""
+        if self.field_range is not None:
+            return self.field_range
+        ranges, = self.hooks.compute(
+            per_block(_measures._block_range, self.cells, self._field.rechunk(self.cells.chunks)),
+            stage="Morse: the field's range")
+        return _measures.range_of(*ranges.ravel())
+
+    def _block_counts(self):
+        """Each block's cells' vertex counts (`_block_cells.block_counts`), kept."""
+        if self._counts is None:
+            self._counts, = self.hooks.persist(block_counts(self.cells),
+                                               stage="Morse: each block's cell sizes")
+        return self._counts
+
+    def cut_in_buckets(self, head: in_buckets.Head, threshold=None, n_regions=None,
+                       dropped=None, merges=None) -> tuple:
+        """A cut where the buckets are (`_bucket_cut`): no task holds every maximum.
+        Returns (lazy labels 1..k, 0 in `dropped` components, (voxel, value,
+        persistence) of each region's highest maximum, the extinctions' `CurveSample`);
+        `head` from `head` with the same `dropped` and `merges`, long enough for
+        `n_regions`. `merges`: `pruned_in_buckets` for a size measure's cut, None for
+        persistence."""
+        merges = self.buckets if merges is None else merges
+        rule = in_buckets.rule_of(head, threshold, n_regions)
+        states = in_buckets.regions(merges, self.firsts, rule, self.hooks, dropped)
         ids = self._block_cells()
         labels, = self.hooks.persist(in_buckets.block_labels(states, self.firsts, ids),
                                      stage="Morse: each block's regions, from the buckets")
         top = in_buckets.tops(states, self.buckets, self.hooks)
         ranks = sample_ranks(head.n_positive)
-        curve = CurveSample(in_buckets.curve_values(self.buckets, ranks, self.hooks, dropped),
+        curve = CurveSample(in_buckets.curve_values(merges, ranks, self.hooks, dropped),
                             ranks, head.n_positive, head.n_components)
         return looked_up(self.cells, ids, labels, np.int32), top, curve
 

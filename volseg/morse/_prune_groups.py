@@ -157,16 +157,25 @@ def _block_neighbours(top, u, v, child, sibling, parent, blocked, stack):
 
 class GroupState:
     """What a group holds, or passes up: its regions (ids `rid` increasing, exact
-    `key`s) and its edges in sweep order (`event`: the event's index; `a` the region
+    `key`s) and its edges in sweep order (`event`: the event's identity; `a` the region
     holding one end, `b` the other's, or -1 outside with the lower bound (`out_key`,
-    `out_id`) of the region there)."""
+    `out_id`) of the region there). `sweep`: None when `event` is the event's index in
+    sweep order, else the sweep key's columns, decreasing in sweep order (the saddle
+    value, saddle, lower end and higher end of `_group_tree.assembled`; `_merge_groups`
+    orders its edges by another key)."""
 
-    __slots__ = ("rid", "key", "event", "a", "b", "out_key", "out_id", "local")
+    __slots__ = ("rid", "key", "event", "a", "b", "out_key", "out_id", "sweep", "local")
 
-    def __init__(self, rid, key, event, a, b, out_key, out_id, local=None):
+    def __init__(self, rid, key, event, a, b, out_key, out_id, sweep=None, local=None):
         self.rid, self.key = rid, key
         self.event, self.a, self.b, self.out_key, self.out_id = event, a, b, out_key, out_id
+        self.sweep = sweep
         self.local = local      # (u, v) in `rid` of a and b, when known (a leaf's)
+
+    @property
+    def nbytes(self) -> int:
+        return sum(getattr(self, c).nbytes for c in _COLUMNS) + sum(
+            c.nbytes for c in self.sweep or ())
 
     @classmethod
     def joined(cls, parts) -> GroupState:
@@ -174,18 +183,15 @@ class GroupState:
         up by both, is inside now (its ends the two holders)."""
         rid = np.concatenate([p.rid for p in parts])
         order = np.argsort(rid, kind="stable")
-        event = np.concatenate([p.event for p in parts])
-        cols = [np.concatenate([getattr(p, c) for p in parts]) for c in ("a", "b", "out_key",
-                                                                         "out_id")]
-        by = np.argsort(event, kind="stable")
-        event, (a, b, out_key, out_id) = event[by], (c[by] for c in cols)
+        event, a, b, out_key, out_id, sweep = _in_sweep_order(parts)
         twin = np.flatnonzero(event[1:] == event[:-1])      # seen from both sides
         b[twin] = a[twin + 1]
         out_key[twin], out_id[twin] = 0, -1
         keep = np.ones(len(event), dtype=bool)
         keep[twin + 1] = False
         return cls(rid[order], np.concatenate([p.key for p in parts])[order], event[keep],
-                   a[keep], b[keep], out_key[keep], out_id[keep])
+                   a[keep], b[keep], out_key[keep], out_id[keep],
+                   None if sweep is None else tuple(c[keep] for c in sweep))
 
     def pruned(self) -> tuple:
         """(decided, rest): the merges this group decides, as (event, extinction, id of
@@ -201,8 +207,27 @@ class GroupState:
         stays = np.flatnonzero(frozen)
         up = GroupState(self.rid[stays], key[stays], self.event[rest], self.rid[ru],
                         np.where(v[rest] >= 0, self.rid[rv], -1), self.out_key[rest],
-                        self.out_id[rest])
+                        self.out_id[rest],
+                        None if self.sweep is None else tuple(c[rest] for c in self.sweep))
         return (self.event[sequence], extinction[sequence], pruned[sequence]), up
+
+
+_COLUMNS = ("rid", "key", "event", "a", "b", "out_key", "out_id")
+
+
+def _in_sweep_order(parts) -> tuple:
+    """The parts' edges (event, a, b, out_key, out_id, sweep) joined in sweep order: by
+    `event`, or by decreasing sweep key; an edge seen by two parts comes twice, side
+    by side."""
+    columns = [np.concatenate([getattr(p, c) for p in parts])
+               for c in ("event", "a", "b", "out_key", "out_id")]
+    if parts[0].sweep is None:
+        by, sweep = np.argsort(columns[0], kind="stable"), None
+    else:
+        sweep = [np.concatenate([p.sweep[k] for p in parts]) for k in range(len(parts[0].sweep))]
+        by = np.lexsort(sweep[::-1])[::-1]
+        sweep = tuple(c[by] for c in sweep)
+    return (*(c[by] for c in columns), sweep)
 
 
 def leaves(source, target, base, leaf_of, n_leaves) -> list:
@@ -224,7 +249,7 @@ def leaves(source, target, base, leaf_of, n_leaves) -> list:
         b = np.where(far_in, far[e], -1)
         out.append(GroupState(m, base[m], event[e], near[e], b,
                               np.where(far_in, 0, base[far[e]]), np.where(far_in, -1, far[e]),
-                              (local[near[e]], np.where(far_in, local[far[e]], -1))))
+                              local=(local[near[e]], np.where(far_in, local[far[e]], -1))))
     return out
 
 
