@@ -242,7 +242,7 @@ def heads(buckets: list, length: int, hooks, dropped=None) -> Head:
     graph = TaskGraph("morse-cut-head", [*buckets, *(dropped or ())])
     parts = [graph(head_of, b.key, length, _key(dropped, j)) for j, b in enumerate(buckets)]
     head, = hooks.compute(*graph.delayed([graph(merged_heads, parts, length)]),
-                          stage="Morse: the events' largest persistences")
+                          stage="Morse: the events' largest extinctions (the head)")
     return head
 
 

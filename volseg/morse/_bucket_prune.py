@@ -152,14 +152,14 @@ def _placed(bucket, sums, shape, grid, edge) -> tuple:
     """(first, each maximum's leaf, its cell's measure)."""
     leaf = _prune_groups._leaf_of(np.asarray(bucket.gids, np.int64), np.array(shape, np.int64),
                                   np.array(grid, np.int64), edge)
-    return bucket.first, leaf, sums
+    return bucket.first, leaf.astype(np.int32), sums
 
 
 def _ends_asked(bucket, firsts) -> list:
     """The distinct cells of its events, split by bucket."""
     dies = bucket.dies
     return by_bucket(firsts, np.unique(np.concatenate([bucket.source[dies],
-                                                       bucket.target[dies]]).astype(np.int64)))
+                                                       bucket.target[dies]])))
 
 
 def _ends_answered(placed: tuple, questions: list) -> list:
@@ -173,14 +173,16 @@ def _leaf_pieces(bucket, placed: tuple, asked: list, replies: list, n_leaves: in
     with an end there, as (young, near end, far end, far end's leaf and measure, *the
     order's key): the sweep's (saddle value, saddle, lower end, higher end), or with
     the pruning's `keys` ((n,) extinction and pruned id by young), the merge order's
-    (-extinction, pruned id)."""
+    (-extinction, pruned id). Maximum ids in the buckets' id type (int32 where they
+    fit: the pieces are most of what the pruning moves)."""
     first, leaf, sums = placed
-    ids = first + np.arange(len(bucket), dtype=np.int64)
+    index = bucket.target.dtype
+    ids = first + np.arange(len(bucket), dtype=index)
     known = np.concatenate(asked)
     known_leaf = np.concatenate([r[0] for r in replies])
     known_sum = np.concatenate([r[1] for r in replies])
     dies = np.flatnonzero(bucket.dies)
-    s, t = (c[dies].astype(np.int64) for c in (bucket.source, bucket.target))
+    s, t = bucket.source[dies], bucket.target[dies]
     at_s, at_t = np.searchsorted(known, s), np.searchsorted(known, t)
     ls, lt = known_leaf[at_s], known_leaf[at_t]
     other = lt != ls
@@ -188,14 +190,14 @@ def _leaf_pieces(bucket, placed: tuple, asked: list, replies: list, n_leaves: in
     near = np.concatenate([s, t[other]])
     far = np.concatenate([t, s[other]])
     near_leaf = np.concatenate([ls, lt[other]])
-    far_leaf = np.concatenate([lt, ls[other]])
+    far_leaf = np.concatenate([lt, ls[other]]).astype(np.int32)
     far_sum = np.concatenate([known_sum[at_t], known_sum[at_s][other]])
     young = ids[dies][both]
     if keys is None:
         sweep = (bucket.saddle_value[dies][both], bucket.saddle[dies][both].astype(np.int64),
                  np.minimum(s, t)[both], np.maximum(s, t)[both])
     else:
-        sweep = (-keys[0][dies][both], keys[1][dies][both])
+        sweep = (-keys[0][dies][both], keys[1][dies][both].astype(index))
     columns = (young, near, far, far_leaf, far_sum, *sweep)
     by_max = np.argsort(leaf, kind="stable")
     max_bounds = np.searchsorted(leaf[by_max], np.arange(n_leaves + 1))
