@@ -156,8 +156,9 @@ class HierarchyOnWorkers:
         if measure not in self._merges:
             persist = self.hooks.persist
             ids = self._block_cells()
-            unit, sums = 1.0, self._block_counts()
-            if measure == "hypervolume":
+            if measure == "size":
+                unit, sums = 1.0, self._block_counts()
+            else:
                 low, high = self._field_range()
                 unit = _measures._unit(low, high)
                 saddles, = persist(pruning.cell_saddles(self.buckets, self.firsts, ids, low),
