@@ -251,20 +251,17 @@ def _key(delayed_list, j):
     return None if delayed_list is None else delayed_list[j].key
 
 
-def dropped_maxima(buckets: list, firsts, ids, counts, min_share: float, hooks) -> list:
+def dropped_maxima(buckets: list, firsts, sizes: list, min_share: float, hooks) -> list:
     """Each bucket's maxima in the components of the graph that hold less than
     `min_share` of its vertices (`MorseHierarchy.small_components`), persisted: the
-    components by pointer jumping over every event, each block's cell sizes (`ids`,
-    `counts`: `_block_cells`) summed in the buckets, then per component in one task
-    (O(components))."""
+    components by pointer jumping over every event, the cells' vertex counts in the
+    buckets (`sizes`, as `summed` gives them) added per component, then across the
+    buckets in one task (O(components))."""
     components = regions(buckets, firsts, ("all",), hooks)
-    graph = TaskGraph("morse-cut-components", [*components, firsts, ids, counts])
-    pieces = [graph(batch_sizes, firsts.key, [(ids.name, *b) for b in part],
-                    [(counts.name, *b) for b in part])
-              for part in batches(list(np.ndindex(ids.numblocks)), len(buckets))]
-    sizes = [graph(component_sizes, c.key, [graph.item(p, j) for p in pieces])
-             for j, c in enumerate(components)]
-    small = graph(small_components, sizes, min_share)
+    graph = TaskGraph("morse-cut-components", [*components, *sizes])
+    per_component = [graph(component_sizes, c.key, s.key)
+                     for c, s in zip(components, sizes, strict=True)]
+    small = graph(small_components, per_component, min_share)
     return list(hooks.persist(*graph.delayed([graph(_dropped, c.key, small)
                                               for c in components]),
                               stage="Morse: the components too small to keep"))
@@ -281,11 +278,28 @@ def batch_sizes(firsts, id_blocks: list, count_blocks: list) -> list:
     return by_bucket(firsts, distinct, sums)
 
 
-def component_sizes(components: Pointers, pieces: list) -> tuple:
-    """(components, their vertex counts) of a bucket's maxima."""
-    at = np.concatenate([p[0] for p in pieces]) - components.first
-    sums = np.concatenate([p[1] for p in pieces])
-    per_maximum = np.bincount(at, weights=sums, minlength=len(components.pointer))
+def bucket_sums(bucket, pieces: list) -> np.ndarray:
+    """(n,) int64: a bucket's maxima's sums from the batches' (ids, sums) pieces."""
+    out = np.zeros(len(bucket), dtype=np.int64)
+    for ids, sums in pieces:
+        np.add.at(out, ids - bucket.first, sums)
+    return out
+
+
+def summed(buckets: list, firsts, ids, sums, label: str) -> list:
+    """Lazy: each bucket's (n,) int64 sums of the blocks' `sums` (object arrays of the
+    block grid, aligned with the blocks' cells `ids`), routed in batches of blocks."""
+    graph = TaskGraph(label, [*buckets, firsts, ids, sums])
+    pieces = [graph(batch_sizes, firsts.key, [(ids.name, *b) for b in part],
+                    [(sums.name, *b) for b in part])
+              for part in batches(list(np.ndindex(ids.numblocks)), len(buckets))]
+    return graph.delayed([graph(bucket_sums, b.key, [graph.item(p, j) for p in pieces])
+                          for j, b in enumerate(buckets)])
+
+
+def component_sizes(components: Pointers, per_maximum) -> tuple:
+    """(components, their vertex counts) of a bucket's maxima (`per_maximum`: each
+    one's cell's count)."""
     which, where = np.unique(components.pointer, return_inverse=True)
     return which, np.bincount(where, weights=per_maximum, minlength=len(which))
 

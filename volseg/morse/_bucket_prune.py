@@ -35,7 +35,7 @@ import numpy as np
 from .._task_graph import TaskGraph
 from . import _measures, _merge_groups, _prune_groups
 from ._block_objects import per_block
-from ._bucket_cut import batch_sizes, block_labels
+from ._bucket_cut import block_labels
 from ._buckets import batches, by_bucket
 from ._group_tree import block_tree
 
@@ -72,25 +72,6 @@ class Merges:
         return self.key, self.tie
 
 
-def _bucket_sums(bucket, pieces: list) -> np.ndarray:
-    """(n,) int64: a bucket's maxima's sums from the batches' (ids, sums) pieces."""
-    out = np.zeros(len(bucket), dtype=np.int64)
-    for ids, sums in pieces:
-        np.add.at(out, ids - bucket.first, sums)
-    return out
-
-
-def summed(buckets: list, firsts, ids, sums, label: str) -> list:
-    """Lazy: each bucket's (n,) int64 sums of the blocks' `sums` (object arrays of the
-    block grid, aligned with the blocks' cells `ids`), routed in batches of blocks."""
-    graph = TaskGraph(label, [*buckets, firsts, ids, sums])
-    pieces = [graph(batch_sizes, firsts.key, [(ids.name, *b) for b in part],
-                    [(sums.name, *b) for b in part])
-              for part in batches(list(np.ndindex(ids.numblocks)), len(buckets))]
-    return graph.delayed([graph(_bucket_sums, b.key, [graph.item(p, j) for p in pieces])
-                          for j, b in enumerate(buckets)])
-
-
 def _saddle_pieces(bucket, firsts) -> list:
     """Its events' saddle values, sent to the buckets of their two cells:
     [(cells sorted, values)] per bucket."""
@@ -104,11 +85,8 @@ def _saddle_pieces(bucket, firsts) -> list:
 def _highest_saddles(bucket, pieces: list, low: float) -> tuple:
     """(first, (n,) each cell's highest saddle value; `low` for a cell with none), as
     `_measures._cell_saddles`."""
-    out = np.full(len(bucket), -np.inf)
-    for ends, values in pieces:
-        np.maximum.at(out, ends - bucket.first, values)
-    out[out == -np.inf] = low
-    return bucket.first, out
+    return bucket.first, _measures.highest_saddles(
+        len(bucket), [(ends - bucket.first, values) for ends, values in pieces], low)
 
 
 def _values_asked(state: tuple, questions: list) -> list:

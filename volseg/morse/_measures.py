@@ -125,8 +125,7 @@ def lazy_cell_measures(cells, field, n_max: int, weight, events, measures, compu
         out["size"] = _total(n_max, weight, 1.0, ids, sizes)
     if "hypervolume" in measures:
         if low_high is None:
-            ranges = compute(per_block(_block_range, cells, field))
-            low_high = range_of(*ranges.ravel())
+            low_high = computed_range(cells, field, compute)
         unit = _unit(*low_high)
         saddles = dask.delayed(_cell_saddles)(events, n_max, low_high[0])
         saddles, = place(gathered(ids, saddles))
@@ -161,8 +160,13 @@ def _unit(low, high) -> float:
     return (float(high) - float(low)) / STEPS if high > low else 1.0
 
 
+def scale_of(weight, unit: float) -> float:
+    """A fixed-point measure's step: the vertex weight (None: 1) times the term's unit."""
+    return (1.0 if weight is None else float(weight)) * unit
+
+
 def _scaled(sums, weight, unit) -> Fixed:
-    return Fixed(sums, (1.0 if weight is None else float(weight)) * unit)
+    return Fixed(sums, scale_of(weight, unit))
 
 
 def _block_hypervolumes(cells, field, ids, saddles, block_id, unit):
@@ -187,6 +191,12 @@ def _block_range(cells, field, block_id):
     return _prune.masked_range(cells.ravel(), field.ravel())
 
 
+def computed_range(cells, field, compute) -> tuple:
+    """The field's (min, max) over the cells of lazy `cells`, in a pass of its own
+    (``compute(array) -> value``); `field` in the cells' chunks."""
+    return range_of(*compute(per_block(_block_range, cells, field)).ravel())
+
+
 def range_of(*parts) -> tuple:
     """(min, max) of the field over the vertices that took part, from the blocks'."""
     return float(min(p[0] for p in parts)), float(max(p[1] for p in parts))
@@ -195,8 +205,15 @@ def range_of(*parts) -> tuple:
 def _cell_saddles(hierarchy, n_max, low) -> np.ndarray:
     """(M,) the highest saddle value among each cell's events (its first merge sweeping
     down); `low` for a cell with none (alone in its component)."""
-    out = np.full(n_max, -np.inf)
-    np.maximum.at(out, hierarchy.source, hierarchy.saddle_value)
-    np.maximum.at(out, hierarchy.target, hierarchy.saddle_value)
+    return highest_saddles(n_max, [(hierarchy.source, hierarchy.saddle_value),
+                                   (hierarchy.target, hierarchy.saddle_value)], low)
+
+
+def highest_saddles(n: int, pairs, low: float) -> np.ndarray:
+    """(n,) the highest of the saddle values given to each of n cells (`pairs` of
+    (cells, values)); `low` for a cell given none."""
+    out = np.full(n, -np.inf)
+    for cells, values in pairs:
+        np.maximum.at(out, cells, values)
     out[out == -np.inf] = low
     return out

@@ -26,7 +26,6 @@ from . import _bucket_cut as in_buckets
 from . import _bucket_prune as pruning
 from . import _measures
 from ._block_cells import block_cells, block_counts, gathered, looked_up
-from ._block_objects import per_block
 from ._curve import CurveSample, sample_ranks
 from ._hierarchy import MorseHierarchy, checked_weight, region_table
 from ._measures import lazy_cell_measures
@@ -143,8 +142,8 @@ class HierarchyOnWorkers:
     def dropped_components(self, min_share: float) -> list:
         """Each bucket's maxima (persisted) in the components of the graph holding less
         than `min_share` of its vertices: what ``min_component`` drops."""
-        return in_buckets.dropped_maxima(self.buckets, self.firsts, self._block_cells(),
-                                         self._block_counts(), min_share, self.hooks)
+        return in_buckets.dropped_maxima(self.buckets, self.firsts, self._bucket_sizes(),
+                                         min_share, self.hooks)
 
     def pruned_in_buckets(self, measure: str) -> list:
         """Each bucket's `_bucket_prune.Merges` of the pruning by `measure` (``size`` or
@@ -157,7 +156,7 @@ class HierarchyOnWorkers:
             persist = self.hooks.persist
             ids = self._block_cells()
             if measure == "size":
-                unit, sums = 1.0, self._block_counts()
+                unit, totals = 1.0, self._bucket_sizes()
             else:
                 low, high = self._field_range()
                 unit = _measures._unit(low, high)
@@ -166,12 +165,12 @@ class HierarchyOnWorkers:
                 sums, = persist(pruning.block_hypervolumes(self.cells, self._field, ids,
                                                            saddles, unit),
                                 stage="Morse: each block's cells' hypervolumes")
-            totals = persist(*pruning.summed(self.buckets, self.firsts, ids, sums,
-                                             "morse-cell-measures"),
-                             stage=f"Morse: the cells' {measure}, in the buckets")
-            weight = 1.0 if self.vertex_weight is None else float(self.vertex_weight)
+                totals = persist(*in_buckets.summed(self.buckets, self.firsts, ids, sums,
+                                                    "morse-cell-measures"),
+                                 stage=f"Morse: the cells' {measure}, in the buckets")
             self._merges[measure] = list(persist(*pruning.pruned(
-                self.buckets, self.firsts, totals, self.shape, weight * unit, measure),
+                self.buckets, self.firsts, totals, self.shape,
+                _measures.scale_of(self.vertex_weight, unit), measure),
                 stage=f"Morse: the pruning by {measure}, in a tree of groups"))
         return self._merges[measure]
 
@@ -179,16 +178,20 @@ class HierarchyOnWorkers:
         """The field's (min, max) over the cells, as the ascent found it or computed."""
         if self.field_range is not None:
             return self.field_range
-        ranges, = self.hooks.compute(
-            per_block(_measures._block_range, self.cells, self._field.rechunk(self.cells.chunks)),
-            stage="Morse: the field's range")
-        return _measures.range_of(*ranges.ravel())
+        return _measures.computed_range(
+            self.cells, self._field.rechunk(self.cells.chunks),
+            lambda d: self.hooks.compute(d, stage="Morse: the field's range")[0])
 
-    def _block_counts(self):
-        """Each block's cells' vertex counts (`_block_cells.block_counts`), kept."""
+    def _bucket_sizes(self) -> list:
+        """Each bucket's cells' vertex counts (`_bucket_cut.summed` of the blocks'
+        `_block_cells.block_counts`), kept: what ``min_component`` and a size cut read."""
         if self._counts is None:
-            self._counts, = self.hooks.persist(block_counts(self.cells),
-                                               stage="Morse: each block's cell sizes")
+            counts, = self.hooks.persist(block_counts(self.cells),
+                                         stage="Morse: each block's cell sizes")
+            self._counts = list(self.hooks.persist(
+                *in_buckets.summed(self.buckets, self.firsts, self._block_cells(), counts,
+                                   "morse-cell-sizes"),
+                stage="Morse: the cells' sizes, in the buckets"))
         return self._counts
 
     def cut_in_buckets(self, head: in_buckets.Head, threshold=None, n_regions=None,
