@@ -27,6 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._distinct import distinct
 from .._task_graph import TaskGraph
 from . import _ranks
 from ._buckets import Bucket, batches, by_bucket, first_ids
@@ -188,7 +189,7 @@ def _inside(state: Pointers) -> Pointers:
 def asked(state: Pointers, firsts) -> list:
     """What the bucket asks each bucket: the sorted distinct maxima its unknown
     pointers lead to, split by their bucket."""
-    return by_bucket(firsts, np.unique(state.pointer[~state.known]))
+    return by_bucket(firsts, distinct(state.pointer[~state.known]))
 
 
 def answers(state: Pointers, questions: list) -> list:

@@ -17,6 +17,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._distinct import distinct
+
 __all__ = []
 
 
@@ -53,7 +55,7 @@ def _up(keys, ends, box, shape):
     order = np.argsort(keys)
     keys, ends = keys[order], ends[order]
     ends = _resolved(keys, ends)
-    refs = np.unique(-1 - ends[ends < 0])
+    refs = distinct(-1 - ends[ends < 0])
     face = _on_faces(keys, box, shape)
     return (keys[face], ends[face]), refs, (keys, ends)
 

@@ -10,6 +10,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .. import _kuhn
+from .._distinct import distinct
 
 __all__ = ["grid_offsets"]
 
@@ -80,7 +81,7 @@ def _csr_adjacency(adjacency, n_vertices):
     rows = rows.astype(np.int64, copy=False)
     cols = cols.astype(np.int64, copy=False)
     keep = rows != cols
-    key = np.unique(np.concatenate([rows[keep] * n_vertices + cols[keep],
+    key = distinct(np.concatenate([rows[keep] * n_vertices + cols[keep],
                                     cols[keep] * n_vertices + rows[keep]]))
     indptr = np.zeros(n_vertices + 1, dtype=np.int64)
     np.cumsum(np.bincount(key // n_vertices, minlength=n_vertices), out=indptr[1:])

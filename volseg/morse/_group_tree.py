@@ -32,6 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._distinct import distinct
 from . import _block_kernels as kernels
 from . import _kernels
 from ._edges import _saddle_order
@@ -101,7 +102,7 @@ def decide(items: _Items, faces: tuple, group_id: int):
     `group_id`: the group's place in `block_tree` (what a report of the tree names)."""
     order = _saddle_order(items.value, items.saddle, items.a, items.b)
     items = items.taken(order)
-    nodes = np.unique(np.concatenate([items.x, items.y]))
+    nodes = distinct(np.concatenate([items.x, items.y]))
     x, y = np.searchsorted(nodes, items.x), np.searchsorted(nodes, items.y)
     node_open = np.isin(nodes, np.concatenate(faces))
     n = len(items.a)

@@ -25,6 +25,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from .._distinct import distinct
 from .._union_find import find_root
 from ._prune_groups import GroupState
 
@@ -96,6 +97,6 @@ def decided(group: GroupState) -> tuple:
     rest = ~done
     a = rid[root[u[rest]]]
     b = np.where(v[rest] >= 0, rid[root[np.maximum(v[rest], 0)]], -1)
-    up = state(np.unique(np.concatenate([a, b[b >= 0]])), group.event[rest], a, b,
+    up = state(distinct(np.concatenate([a, b[b >= 0]])), group.event[rest], a, b,
                ext[rest], tie[rest])
     return (rid[gone[done]], rid[keep[done]], ext[done], tie[done]), up
