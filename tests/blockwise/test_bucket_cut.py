@@ -152,6 +152,22 @@ def test_leaves_double_until_about_two_per_bucket():
     assert _bucket_prune.leaf_grid((10, 10, 10), 1, 2) == (16, (1, 1, 1))
 
 
+def test_the_keys_come_down_the_tree_or_it_is_an_error():
+    """A leaf looks up every one of its events' keys in what came down the tree
+    (`_bucket_prune._keys_down`); one missing is a bug, never a silent key."""
+    decided = (np.array([5, 2]), np.array([20, 10]), np.array([5, 2]))
+    known = (np.array([7]), np.array([30]), np.array([7]))
+    keys = _bucket_prune._known_keys(decided, known)
+    ext, tie = _bucket_prune._looked_up(keys, np.array([7, 2, 5]))
+    assert ext.tolist() == [30, 10, 20] and tie.tolist() == [7, 2, 5]
+    for missing in ([3], [8], [0, 2]):
+        with pytest.raises(RuntimeError, match="lost the key"):
+            _bucket_prune._looked_up(keys, np.array(missing))
+    low, high = _bucket_prune._keys_down(decided, (np.array([2, 7]), np.array([5])), known)
+    assert [c.tolist() for c in low] == [[2, 7], [10, 30], [2, 7]]
+    assert [c.tolist() for c in high] == [[5], [20], [5]]
+
+
 @pytest.mark.parametrize("connectivity", [6, pytest.param(26, marks=pytest.mark.slow)])
 def test_ties_everywhere_and_a_mask_of_several_components(connectivity, never_joined):
     rng = np.random.default_rng(4)

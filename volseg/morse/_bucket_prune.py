@@ -8,7 +8,7 @@ holds every maximum or event (issue 30).
    its cells' saddles (as a cut gives its labels, `_bucket_cut.block_labels`) and
    sums the blocks' fixed-point terms there (`_measures`: integers, exact in any
    order).
-2. The leaves (`leaf_grid`, `leaf_states`): the grid in cubes, each maximum in the
+2. The leaves (`leaf_grid`, `leaf_state`): the grid in cubes, each maximum in the
    cube of its voxel. Each bucket asks the buckets of its events' two cells for their
    leaves and measures (one exchange), then sends each leaf its maxima and the events
    touching them, with their sweep keys: a leaf orders its edges by the sweep key
@@ -17,7 +17,12 @@ holds every maximum or event (issue 30).
    outside cannot change, each group joins what its two halves passed up and prunes
    again (`_prune_groups.GroupState.pruned`); the root leaves nothing. What a group
    passes up lies near its faces (measured: 1.7 % of the maxima reach the root at
-   256^3), so the groups high in the tree stay small.
+   256^3), so the groups high in the tree stay small. The keys found (extinction,
+   pruned id) go back down the same tree (`_keys_down`): each group sends each half
+   the keys of the events that half passed up, so that each leaf, which kept its
+   edges, knows all its keys without a second exchange with the buckets. A second
+   pass up the tree names each merge's regions as the sequential order does
+   (`_merge_groups`).
 4. Each decided merge goes to the bucket of the larger id of its two regions, the
    one that is never a region again (`Merges`, aligned with the bucket's maxima). A
    cut reads them as a persistence cut reads a `Bucket` (`_bucket_cut`): the cut
@@ -32,6 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._distinct import distinct
 from .._task_graph import TaskGraph
 from . import _measures, _merge_groups, _prune_groups
 from ._block_objects import per_block
@@ -136,7 +142,7 @@ def _placed(bucket, sums, shape, grid, edge) -> tuple:
 def _ends_asked(bucket, firsts) -> list:
     """The distinct cells of its events, split by bucket."""
     dies = bucket.dies
-    return by_bucket(firsts, np.unique(np.concatenate([bucket.source[dies],
+    return by_bucket(firsts, distinct(np.concatenate([bucket.source[dies],
                                                        bucket.target[dies]])))
 
 
@@ -145,14 +151,12 @@ def _ends_answered(placed: tuple, questions: list) -> list:
     return [(leaf[q - first], sums[q - first]) for q in questions]
 
 
-def _leaf_pieces(bucket, placed: tuple, asked: list, replies: list, n_leaves: int,
-                 keys=None) -> list:
+def _leaf_pieces(bucket, placed: tuple, asked: list, replies: list, n_leaves: int) -> list:
     """What a bucket sends each leaf: (its maxima there, their measures) and the events
     with an end there, as (young, near end, far end, far end's leaf and measure, *the
-    order's key): the sweep's (saddle value, saddle, lower end, higher end), or with
-    the pruning's `keys` ((n,) extinction and pruned id by young), the merge order's
-    (-extinction, pruned id). Maximum ids in the buckets' id type (int32 where they
-    fit: the pieces are most of what the pruning moves)."""
+    sweep key: saddle value, saddle, lower end, higher end). Maximum ids in the
+    buckets' id type (int32 where they fit: the pieces are most of what the pruning
+    moves)."""
     first, leaf, sums = placed
     index = bucket.target.dtype
     ids = first + np.arange(len(bucket), dtype=index)
@@ -170,13 +174,9 @@ def _leaf_pieces(bucket, placed: tuple, asked: list, replies: list, n_leaves: in
     near_leaf = np.concatenate([ls, lt[other]])
     far_leaf = np.concatenate([lt, ls[other]]).astype(np.int32)
     far_sum = np.concatenate([known_sum[at_t], known_sum[at_s][other]])
-    young = ids[dies][both]
-    if keys is None:
-        sweep = (bucket.saddle_value[dies][both], bucket.saddle[dies][both].astype(np.int64),
-                 np.minimum(s, t)[both], np.maximum(s, t)[both])
-    else:
-        sweep = (-keys[0][dies][both], keys[1][dies][both].astype(index))
-    columns = (young, near, far, far_leaf, far_sum, *sweep)
+    columns = (ids[dies][both], near, far, far_leaf, far_sum,
+               bucket.saddle_value[dies][both], bucket.saddle[dies][both].astype(np.int64),
+               np.minimum(s, t)[both], np.maximum(s, t)[both])
     by_max = np.argsort(leaf, kind="stable")
     max_bounds = np.searchsorted(leaf[by_max], np.arange(n_leaves + 1))
     by_edge = np.argsort(near_leaf, kind="stable")
@@ -205,16 +205,55 @@ def leaf_state(g: int, pieces: list) -> _prune_groups.GroupState:
 
 
 def _pruned_leaf(g: int, pieces: list) -> tuple:
-    return leaf_state(g, pieces).pruned()
+    """(decided, up, what the leaf's second pass reads: its maxima and its edges'
+    (young, near end, far end or -1 outside))."""
+    state = leaf_state(g, pieces)
+    decided, up = state.pruned()
+    return decided, up, (state.rid, state.event, state.a, state.b)
 
 
 def _pruned_node(low, high) -> tuple:
-    """(decided, up) of a group from what its two halves passed up."""
-    return _prune_groups.GroupState.joined([low, high]).pruned()
+    """(decided, up, the events each half passed up) of a group."""
+    decided, up = _prune_groups.GroupState.joined([low, high]).pruned()
+    return decided, up, (low.event, high.event)
 
 
-def _merged_leaf(g: int, pieces: list) -> tuple:
-    return _merge_groups.decided(leaf_state(g, pieces))
+def _known_keys(decided: tuple, known: tuple) -> tuple:
+    """(events increasing, their extinctions, their pruned ids) of a group: what it
+    decided and what the group above sent it for the events it passed up."""
+    event, ext, tie = (np.concatenate([decided[k], known[k]]) for k in range(3))
+    order = np.argsort(event, kind="stable")
+    return event[order], ext[order], tie[order]
+
+
+def _looked_up(keys: tuple, events) -> tuple:
+    """The keys of `events`, every one of which `keys` must hold."""
+    event, ext, tie = keys
+    at = np.searchsorted(event, events)
+    if len(at) and (at.max() >= len(event) or not np.array_equal(event[at], events)):
+        raise RuntimeError("the pruning's tree lost the key of an event")
+    return ext[at], tie[at]
+
+
+def _keys_down(decided: tuple, sides: tuple, known: tuple) -> tuple:
+    """For each half of a group, the keys of the events it passed up: (events,
+    extinctions, pruned ids), from what the group decided and `known`."""
+    keys = _known_keys(decided, known)
+    return tuple((events, *_looked_up(keys, events)) for events in sides)
+
+
+def _nothing_known() -> tuple:
+    return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64)
+
+
+def _merged_leaf(decided: tuple, kept: tuple, known: tuple) -> tuple:
+    """The second pass at a leaf: its edges in the merge order of their keys (what it
+    decided in the first pass, or what came down the tree), `_merge_groups.decided`."""
+    rid, young, near, far = kept
+    ext, tie = _looked_up(_known_keys(decided, known), young)
+    by = np.lexsort((tie, -ext))[::-1]
+    return _merge_groups.decided(_merge_groups.state(rid, young[by], near[by], far[by],
+                                                     ext[by], tie[by]))
 
 
 def _merged_node(low, high) -> tuple:
@@ -223,22 +262,35 @@ def _merged_node(low, high) -> tuple:
 
 def _root(step, *args) -> tuple:
     """`step` at the root group, which must leave no event undecided."""
-    decided, up = step(*args)
-    if len(up.event):
+    result = step(*args)
+    if len(result[1].event):
         raise RuntimeError("the root group of the pruning left events undecided")
-    return decided, up
+    return result
 
 
-def _tree(graph, tree, grid, pieces, leaf, node) -> list:
-    """The keys of each group's (decided, up), children before parents (`tree`): `leaf`
-    at the leaves from the buckets' `pieces`, `node` above from what the halves pass."""
+def _up(graph, tree, leaves: dict, node) -> list:
+    """The keys of each group's result, children before parents (`tree`): the task
+    `leaves[i]` ((function, *args)) at leaf group i, `node` above from what its
+    halves pass up (their results' item 1)."""
     nodes = []
-    for i, (lo, _, _, low, high) in enumerate(tree):
-        args = ((leaf, int(np.ravel_multi_index(lo, grid)),
-                 [graph.item(p, int(np.ravel_multi_index(lo, grid))) for p in pieces])
-                if low is None else (node, graph.item(nodes[low], 1), graph.item(nodes[high], 1)))
+    for i, (_, _, _, low, high) in enumerate(tree):
+        args = leaves[i] if low is None else (node, graph.item(nodes[low], 1),
+                                              graph.item(nodes[high], 1))
         nodes.append(graph(_root, *args) if i == len(tree) - 1 else graph(*args))
-    return [graph.item(n, 0) for n in nodes]
+    return nodes
+
+
+def _down(graph, tree, nodes: list) -> dict:
+    """The keys of each group's known keys (`_keys_down`), parents before children:
+    what comes down to it for the events it passed up."""
+    known = {len(tree) - 1: graph(_nothing_known)}
+    for i in range(len(tree) - 1, -1, -1):
+        low, high = tree[i][3:]
+        if low is not None:
+            split = graph(_keys_down, graph.item(nodes[i], 0), graph.item(nodes[i], 2),
+                          known[i])
+            known[low], known[high] = graph.item(split, 0), graph.item(split, 1)
+    return known
 
 
 def _by_bucket_of(firsts, results: list, column: int) -> list:
@@ -248,15 +300,6 @@ def _by_bucket_of(firsts, results: list, column: int) -> list:
     order = np.argsort(columns[column], kind="stable")
     columns = [c[order] for c in columns]
     return by_bucket(firsts, columns[column], *(c for k, c in enumerate(columns) if k != column))
-
-
-def _keys(bucket, pieces: list) -> tuple:
-    """((n,) extinction, (n,) pruned id) of each of its maxima's events, by young."""
-    ext = np.zeros(len(bucket), np.int64)
-    tie = np.full(len(bucket), -1, np.int64)
-    for young, extinction, pruned in pieces:
-        ext[young - bucket.first], tie[young - bucket.first] = extinction, pruned
-    return ext, tie
 
 
 def _merges(bucket, pieces: list, scale: float, measure: str) -> Merges:
@@ -275,23 +318,27 @@ def pruned(buckets: list, firsts, sums: list, shape, scale: float, measure: str)
     edge, grid = leaf_grid(shape, len(buckets))
     n_leaves = int(np.prod(grid))
     tree = block_tree(grid)
+    leaves = {i: int(np.ravel_multi_index(g[0], grid)) for i, g in enumerate(tree)
+              if g[3] is None}
     graph = TaskGraph("morse-prune", [*buckets, firsts, *sums])
     placed = [graph(_placed, b.key, s.key, shape, grid, edge)
               for b, s in zip(buckets, sums, strict=True)]
     asked = [graph(_ends_asked, b.key, firsts.key) for b in buckets]
     answers = [graph(_ends_answered, p, [graph.item(q, j) for q in asked])
                for j, p in enumerate(placed)]
-    replies = [[graph.item(a, i) for a in answers] for i in range(len(buckets))]
-    # The pruning's keys, decided in the tree of groups.
-    pieces = [graph(_leaf_pieces, b.key, placed[j], asked[j], replies[j], n_leaves)
+    pieces = [graph(_leaf_pieces, b.key, placed[j], asked[j],
+                    [graph.item(a, j) for a in answers], n_leaves)
               for j, b in enumerate(buckets)]
-    decided = _tree(graph, tree, grid, pieces, _pruned_leaf, _pruned_node)
-    split = [graph(_by_bucket_of, firsts.key, part, 0) for part in batches(decided, len(buckets))]
-    keys = [graph(_keys, b.key, [graph.item(s, j) for s in split]) for j, b in enumerate(buckets)]
+    # The pruning's keys, decided in the tree of groups, then sent back down it to the
+    # leaves, which kept their edges.
+    first = _up(graph, tree, {i: (_pruned_leaf, g, [graph.item(p, g) for p in pieces])
+                              for i, g in leaves.items()}, _pruned_node)
+    known = _down(graph, tree, first)
     # The merges' region ids, decided in the same tree.
-    pieces = [graph(_leaf_pieces, b.key, placed[j], asked[j], replies[j], n_leaves, keys[j])
-              for j, b in enumerate(buckets)]
-    decided = _tree(graph, tree, grid, pieces, _merged_leaf, _merged_node)
+    second = _up(graph, tree, {i: (_merged_leaf, graph.item(first[i], 0),
+                                   graph.item(first[i], 2), known[i]) for i in leaves},
+                 _merged_node)
+    decided = [graph.item(n, 0) for n in second]
     split = [graph(_by_bucket_of, firsts.key, part, 0) for part in batches(decided, len(buckets))]
     return graph.delayed([graph(_merges, b.key, [graph.item(s, j) for s in split], scale,
                                 measure) for j, b in enumerate(buckets)])
