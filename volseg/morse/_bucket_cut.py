@@ -273,10 +273,10 @@ def batch_sizes(firsts, id_blocks: list, count_blocks: list) -> list:
     cell, split by bucket: [(ids, sums)]."""
     ids = np.concatenate([b.flat[0] for b in id_blocks])
     counts = np.concatenate([b.flat[0] for b in count_blocks])
-    distinct, where = np.unique(ids, return_inverse=True)
-    sums = np.zeros(len(distinct), dtype=np.int64)
+    cells, where = np.unique(ids, return_inverse=True)
+    sums = np.zeros(len(cells), dtype=np.int64)
     np.add.at(sums, where, counts)              # int64: exact for fixed-point sums too
-    return by_bucket(firsts, distinct, sums)
+    return by_bucket(firsts, cells, sums)
 
 
 def bucket_sums(bucket, pieces: list) -> np.ndarray:
@@ -340,8 +340,8 @@ def batch_questions(firsts, blocks: list) -> tuple:
     """(the distinct cells of some blocks split by bucket, each block's cells' place in
     them, each block's cell count)."""
     ids = [b.flat[0] for b in blocks]
-    distinct, where = np.unique(np.concatenate(ids), return_inverse=True)
-    return by_bucket(firsts, distinct), where, [len(i) for i in ids]
+    cells, where = np.unique(np.concatenate(ids), return_inverse=True)
+    return by_bucket(firsts, cells), where, [len(i) for i in ids]
 
 
 def labels_of(state: Pointers, questions: list) -> list:
