@@ -1,9 +1,10 @@
 import numpy as np
-from hypothesis import given
+import pytest
+from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from volseg._distinct import distinct
+from volseg._distinct import distinct, places
 
 
 @given(arrays(st.sampled_from([np.int32, np.int64, np.uint8]), st.integers(0, 3).map(
@@ -19,3 +20,30 @@ def test_distinct_does_not_change_its_input():
     values = np.array([[3, 1], [3, 2]])
     assert distinct(values).tolist() == [1, 2, 3]
     assert values.tolist() == [[3, 1], [3, 2]]
+
+
+@settings(deadline=None)     # the first call of each dtype loads its compiled kernel
+@given(st.sampled_from([np.int8, np.int32, np.int64, np.uint16]).flatmap(lambda dtype: arrays(
+    dtype, st.integers(0, 3).map(lambda d: (5,) * d),
+    elements=st.integers(0 if np.dtype(dtype).kind == "u" else -3, 100))))
+def test_places_is_np_unique_with_its_inverse(values):
+    ids, where = places(values)
+    expected, inverse = np.unique(values, return_inverse=True)
+    assert ids.dtype == expected.dtype
+    np.testing.assert_array_equal(ids, expected)
+    np.testing.assert_array_equal(where, inverse.reshape(values.shape))
+
+
+def test_places_grows_its_table_past_a_thousand_ids_far_apart():
+    rng = np.random.default_rng(3)
+    values = rng.integers(-2**62, 2**62, size=50_000)
+    values = np.repeat(values, rng.integers(1, 4, size=len(values)))    # runs of one id
+    ids, where = places(values)
+    expected, inverse = np.unique(values, return_inverse=True)
+    np.testing.assert_array_equal(ids, expected)
+    np.testing.assert_array_equal(where, inverse)
+
+
+def test_places_refuses_floats():
+    with pytest.raises(TypeError, match="integers"):
+        places(np.array([1.0, 2.0]))

@@ -1,9 +1,14 @@
-"""`distinct`: the sorted distinct values of an array of many distinct values (a
-leaf: numpy only)."""
+"""Distinct ids, fast where numpy is slow on them (a leaf: numpy and numba only).
 
+- `distinct`: the sorted distinct values, by a sort;
+- `places`: the same, and each value's place among them (``np.unique``'s inverse),
+  by a hash table.
+"""
+
+import numba
 import numpy as np
 
-__all__ = ["distinct"]
+__all__ = ["distinct", "places"]
 
 
 def distinct(values) -> np.ndarray:
@@ -18,3 +23,80 @@ def distinct(values) -> np.ndarray:
     keep[0] = True
     np.not_equal(out[1:], out[:-1], out=keep[1:])
     return out[keep]
+
+
+def places(values) -> tuple:
+    """``np.unique(values, return_inverse=True)`` of integer ids: (their sorted
+    distinct values, each value's index among them, int64 of `values`' shape).
+
+    One pass through a hash table numbers the ids as first seen (a run of one id is
+    one lookup), then only the distinct ids are sorted: 3.5x faster than `distinct`
+    and `np.searchsorted` on a block's cells (2.3 M voxels, 151 000 cells: 0.07 s
+    against 0.25 s)."""
+    array = np.asarray(values)
+    if array.dtype.kind not in "iu" or array.dtype.itemsize > 8 or array.dtype == np.uint64:
+        raise TypeError(f"`values` must hold integers of at most 63 bits, got {array.dtype}")
+    flat = array.ravel()
+    inverse = np.empty(len(flat), dtype=np.int64)
+    seen = _first_seen(flat, inverse)
+    order = np.argsort(seen)
+    rank = np.empty(len(seen), dtype=np.int64)
+    rank[order] = np.arange(len(seen))
+    _renumbered(inverse, rank)
+    return seen[order].astype(array.dtype), inverse.reshape(array.shape)
+
+
+@numba.njit(cache=True, nogil=True)
+def _first_seen(values, inverse):
+    """inverse[i] = the number of values[i], the distinct values numbered as first
+    seen; returns them in that order. An open-addressing table of (value, number),
+    doubled before it is half full."""
+    bits = 10
+    keys = np.empty(1 << bits, dtype=np.int64)
+    numbers = np.full(1 << bits, -1, dtype=np.int64)
+    seen = np.empty(1 << bits, dtype=np.int64)
+    n, last, number = 0, 0, -1
+    for i in range(len(values)):
+        v = np.int64(values[i])
+        if number < 0 or v != last:
+            h = _slot(keys, numbers, v, bits)
+            if numbers[h] >= 0:
+                number = numbers[h]
+            else:                                       # a new value
+                if n == len(seen):
+                    seen = np.concatenate((seen, np.empty(n, dtype=np.int64)))
+                keys[h], numbers[h], seen[n], number = v, n, v, n
+                n += 1
+                if 2 * n > len(numbers):
+                    bits += 1
+                    keys, numbers = _grown(seen[:n], bits)
+            last = v
+        inverse[i] = number
+    return seen[:n]
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _slot(keys, numbers, key, bits):
+    """The slot of `key` in a table of 2^bits (keys, numbers), -1 numbers empty."""
+    mask = (1 << bits) - 1
+    h = np.int64((np.uint64(key) * np.uint64(0x9E3779B97F4A7C15)) >> np.uint64(64 - bits))
+    while numbers[h] >= 0 and keys[h] != key:
+        h = (h + 1) & mask
+    return h
+
+
+@numba.njit(cache=True, nogil=True)
+def _grown(seen, bits):
+    """A table of 2^bits slots holding `seen` numbered by their order."""
+    keys = np.empty(1 << bits, dtype=np.int64)
+    numbers = np.full(1 << bits, -1, dtype=np.int64)
+    for k in range(len(seen)):
+        h = _slot(keys, numbers, seen[k], bits)
+        keys[h], numbers[h] = seen[k], k
+    return keys, numbers
+
+
+@numba.njit(cache=True, nogil=True)
+def _renumbered(inverse, rank):
+    for i in range(len(inverse)):
+        inverse[i] = rank[inverse[i]]

@@ -44,7 +44,7 @@ import numpy as np
 
 from .. import _atomic
 from .._block_hooks import BlockHooks
-from .._distinct import distinct
+from .._distinct import places
 from .._halo import block_starts, with_halo
 from .._task_graph import TaskGraph, _one_object
 from . import _block_kernels as kernels
@@ -142,8 +142,7 @@ def _pairs_of_block(halo_values, halo_cells, origin, shape, offsets):
     `spanning_edges` keeps the block's forest."""
     faces = _faces(halo_cells, origin, shape)
     values = np.ascontiguousarray(halo_values, dtype=np.float64)
-    cells = distinct(halo_cells)
-    local = np.searchsorted(cells, halo_cells)      # np.unique's inverse, 1.5x faster
+    cells, local = places(halo_cells)
     strides = np.array([s // values.itemsize for s in values.strides], dtype=np.int64)
     owned = np.arange(values.size).reshape(values.shape)[1:-1, 1:-1, 1:-1].ravel()
     owned = owned[values.ravel()[owned] > -np.inf]         # the block's voxels in the mask
