@@ -48,9 +48,9 @@ from .._distinct import places
 from .._halo import block_starts, with_halo
 from .._task_graph import TaskGraph, _one_object
 from . import _block_kernels as kernels
-from . import _buckets, _exits, _group_tree, _kernels, _measures, _ranks
+from . import _buckets, _exits, _group_tree, _measures, _ranks
 from ._block_objects import only, per_block
-from ._edges import _cross_edges, _saddle_order
+from ._edges import _cross_edges, spanning_forest
 from ._graph import _Neighbourhood, grid_offsets
 from ._on_workers import HierarchyOnWorkers
 from ._phases import _Phases
@@ -138,8 +138,8 @@ def _pairs_of_block(halo_values, halo_cells, origin, shape, offsets):
     holds the neighbours' values (-inf outside the volume and the mask). An edge is
     seen from its smaller cell's voxel, so each edge between two blocks is found by
     one of them. Cells are renumbered in increasing order (the pairs and ties keep the
-    in-memory order), the highest saddle per pair is sorted as in memory and
-    `spanning_edges` keeps the block's forest."""
+    in-memory order) and `spanning_forest` keeps the block's forest of the highest
+    saddles per pair, in the in-memory order."""
     faces = _faces(halo_cells, origin, shape)
     values = np.ascontiguousarray(halo_values, dtype=np.float64)
     cells, local = places(halo_cells)
@@ -154,9 +154,7 @@ def _pairs_of_block(halo_values, halo_cells, origin, shape, offsets):
     graph = _Neighbourhood(values.ravel(), owned, True, offsets @ strides,
                            np.zeros(1, np.int64), np.zeros(1, np.int64), values.shape)
     a, b, saddle = _cross_edges(graph, local.ravel(), len(cells))
-    order = _saddle_order(graph.values[saddle], saddle, a, b)
-    keep = np.zeros(len(a), dtype=bool)
-    _kernels.spanning_edges(a, b, order, len(cells), keep)
+    keep = spanning_forest(graph.values[saddle], saddle, a, b, len(cells))
     a, b, saddle = a[keep], b[keep], saddle[keep]
     i, j, k = np.unravel_index(saddle, values.shape)
     gids = ((origin[0] + i - 1) * shape[1] + origin[1] + j - 1) * shape[2] + origin[2] + k - 1

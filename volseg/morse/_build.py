@@ -10,7 +10,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from . import _kernels as kernels
-from ._edges import _cross_edges, _saddle_order
+from ._edges import _cross_edges, _saddle_order, spanning_forest
 from ._graph import _Neighbourhood, _neighbourhood, _validate_field
 from ._hierarchy import MorseHierarchy
 from ._phases import _Phases
@@ -53,13 +53,18 @@ class _MergeEvents:
 
 def _merge_events(graph: _Neighbourhood, cell, n_maxima,
                   phases: _Phases) -> _MergeEvents:
-    """One edge per pair of adjacent cells (its highest saddle), sorted by (saddle value,
-    saddle vertex, pair), then one Kruskal over them from the highest saddle down."""
+    """One edge per pair of adjacent cells (its highest saddle); the maximum spanning
+    forest of them in the order (saddle value, saddle vertex, pair), then one Kruskal
+    over its edges from the highest saddle down."""
     edge_a, edge_b, edge_v = _cross_edges(graph, cell, n_maxima)
     phases.done("cross-cell edges")
-    order = _saddle_order(graph.values[edge_v], edge_v, edge_a, edge_b)
-    phases.done("saddle order (sort, ties)")
-    sorted_edges = [np.empty_like(edge_a), np.empty_like(edge_b), np.empty_like(edge_v)]
+    # Only the cell graph's maximum spanning forest can merge two components.
+    keys = graph.values[edge_v]
+    forest = np.flatnonzero(spanning_forest(keys, edge_v, edge_a, edge_b, n_maxima))
+    order = _saddle_order(keys, edge_v, edge_a, edge_b, forest)
+    del keys, forest
+    phases.done("saddle order (spanning forest, sort, ties)")
+    sorted_edges = [np.empty(len(order), dtype=e.dtype) for e in (edge_a, edge_b, edge_v)]
     kernels.gather(order, edge_a, edge_b, edge_v, *sorted_edges)
     del order, edge_a, edge_b, edge_v
     out = [np.empty(max(n_maxima - 1, 0), dtype=t)

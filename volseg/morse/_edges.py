@@ -84,14 +84,44 @@ def _pair_pass(args, chunks, capacity):
     return out, out_starts, counts
 
 
-def _saddle_order(keys, saddle, edge_a, edge_b):
+def _saddle_order(keys, saddle, edge_a, edge_b, edges=None):
     """Argsort of edges by (saddle value `keys`, saddle vertex, cell pair): the
     simulation of simplicity order, with the pair deciding between edges that share a
-    saddle (also the blockwise build's, per block and on the client).
+    saddle (also the blockwise build's, per block and on the client). Given `edges`
+    (indices), those edges in that order.
 
     An unstable value sort, then a compiled pass that orders each run of equal values
     (curvature fields have plateaus): 2x faster than np.lexsort at 256^3.
     """
-    order = np.argsort(keys)
+    order = np.argsort(keys) if edges is None else edges[np.argsort(keys[edges])]
     _kernels.break_ties(order, keys, saddle, edge_a, edge_b)
     return order
+
+
+#: `spanning_forest` sorts first the highest (this many x cells) edges.
+_FIRST_EDGES_PER_CELL = 3
+
+
+def spanning_forest(keys, saddle, edge_a, edge_b, n_cells):
+    """keep[e]: whether edge e is in the maximum spanning forest of cells
+    0..n_cells-1 in the `_saddle_order` (Kruskal from the highest edge down).
+
+    A filter-Kruskal: the highest 3 x n_cells edges are sorted and taken first; of
+    the rest, only the edges between two components still apart are sorted and taken
+    after them (an edge inside a component is refused whenever it comes: components
+    only grow). The same forest as one sort of every edge, 1.7x faster on a 128^3
+    block of a quantized field (7 edges per cell; 40 000 of 650 000 lower edges
+    survive the filter).
+    """
+    keep = np.zeros(len(edge_a), dtype=bool)
+    parent = np.arange(n_cells, dtype=np.int64)
+    first = min(len(keys), _FIRST_EDGES_PER_CELL * n_cells)
+    pivot = np.partition(keys, len(keys) - first)[len(keys) - first] if first else np.inf
+    high = np.flatnonzero(keys > pivot) if first < len(keys) else np.arange(len(keys))
+    _kernels.spanning_edges(edge_a, edge_b, _saddle_order(keys, saddle, edge_a, edge_b, high),
+                            parent, keep)
+    if first < len(keys):
+        low = _kernels.apart(edge_a, edge_b, np.flatnonzero(keys <= pivot), parent)
+        _kernels.spanning_edges(edge_a, edge_b, _saddle_order(keys, saddle, edge_a, edge_b, low),
+                                parent, keep)
+    return keep

@@ -106,14 +106,14 @@ def regions_of_cut(young, target, merged, region):
 
 
 @numba.njit(cache=True, nogil=True)
-def spanning_edges(edge_a, edge_b, order, n_cells, keep):
-    """The blockwise build's per-block forest (`_blocks._pairs_of_block`):
-    keep[e] = True for the edges of the maximum spanning forest, Kruskal from the
-    last of `order` (the highest edge) down, over cells 0..n_cells-1. An edge left
-    out closes a cycle of higher edges of the same block, so it merges nothing in the
-    whole graph either: the forest of the union of the blocks' forests is the whole
-    graph's (the order is strict, so that forest is unique)."""
-    parent = np.arange(n_cells)
+def spanning_edges(edge_a, edge_b, order, parent, keep):
+    """The blockwise build's per-block forest (`_edges.spanning_forest`): keep[e] =
+    True for the edges of the maximum spanning forest, Kruskal from the last of
+    `order` (the highest edge) down, over the union-find `parent` (cells 0..n-1,
+    updated: a second call goes on with lower edges). An edge left out closes a cycle
+    of higher edges of the same block, so it merges nothing in the whole graph
+    either: the forest of the union of the blocks' forests is the whole graph's (the
+    order is strict, so that forest is unique)."""
     for k in range(len(order) - 1, -1, -1):
         e = order[k]
         x = find_root(parent, edge_a[e])
@@ -121,6 +121,19 @@ def spanning_edges(edge_a, edge_b, order, n_cells, keep):
         if x != y:
             parent[max(x, y)] = min(x, y)
             keep[e] = True
+
+
+@numba.njit(cache=True, nogil=True)
+def apart(edge_a, edge_b, edges, parent):
+    """The `edges` whose two cells are in different components of `parent`."""
+    out = np.empty(len(edges), dtype=np.int64)
+    m = 0
+    for k in range(len(edges)):
+        e = edges[k]
+        if find_root(parent, edge_a[e]) != find_root(parent, edge_b[e]):
+            out[m] = e
+            m += 1
+    return out[:m]
 
 
 @numba.njit(cache=True, parallel=True)
