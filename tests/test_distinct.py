@@ -4,7 +4,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from volseg._distinct import distinct, places
+from volseg._distinct import distinct, is_in, places
 
 
 @given(arrays(st.sampled_from([np.int32, np.int64, np.uint8]), st.integers(0, 3).map(
@@ -47,3 +47,10 @@ def test_places_grows_its_table_past_a_thousand_ids_far_apart():
 def test_places_refuses_floats():
     with pytest.raises(TypeError, match="integers"):
         places(np.array([1.0, 2.0]))
+
+
+@given(arrays(np.int64, st.integers(0, 12), elements=st.integers(-4, 6)),
+       arrays(st.sampled_from([np.int32, np.int64]), st.integers(0, 12),
+              elements=st.integers(-4, 6)))
+def test_is_in_is_np_isin(values, ids):
+    np.testing.assert_array_equal(is_in(values, ids), np.isin(values, ids))

@@ -43,6 +43,7 @@ from . import _measures, _merge_groups, _prune_groups
 from ._block_objects import per_block
 from ._bucket_cut import block_labels
 from ._buckets import batches, by_bucket
+from ._edges import _saddle_order
 from ._group_tree import block_tree
 
 __all__ = []
@@ -195,7 +196,7 @@ def leaf_state(g: int, pieces: list) -> _prune_groups.GroupState:
     rid, key, young, near, far, far_leaf, far_sum, *sweep = (
         np.concatenate([p[k] for p in pieces]) for k in range(len(pieces[0])))
     order = np.argsort(rid, kind="stable")
-    by = np.lexsort(sweep[::-1])[::-1]
+    by = _saddle_order(*sweep)[::-1]          # decreasing (value, saddle, pair)
     inside = far_leaf[by] == g
     far = far[by]
     return _prune_groups.GroupState(

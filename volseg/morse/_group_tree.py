@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._distinct import distinct
+from .._distinct import distinct, is_in
 from . import _block_kernels as kernels
 from . import _kernels
 from ._edges import _saddle_order
@@ -104,7 +104,7 @@ def decide(items: _Items, faces: tuple, group_id: int):
     items = items.taken(order)
     nodes = distinct(np.concatenate([items.x, items.y]))
     x, y = np.searchsorted(nodes, items.x), np.searchsorted(nodes, items.y)
-    node_open = np.isin(nodes, np.concatenate(faces))
+    node_open = is_in(nodes, np.concatenate(faces))
     n = len(items.a)
     ev_item, up_item = np.empty(n, np.int64), np.empty(n, np.int64)
     ev_young, up_x, up_y = (np.empty(n, nodes.dtype) for _ in range(3))
