@@ -47,9 +47,10 @@ def prune_group(key, rid, u, v, out_key, out_id):
     """Prune a group as far as its outside allows (module docstring).
 
     key, rid (R,) int64: its regions' keys and ids (increasing ids); u, v (E,): the
-    local ends of its edges in sweep order (highest saddle first), v = -1 where the
-    other end is outside the group, with the lower bound (out_key, out_id) of the
-    region there. Returns (decided (E,) bool, extinction (E,) int64 and pruned (E,)
+    local ends of its edges in sweep order (highest saddle first; their integer type
+    is the links' and region indices': int32 needs 2 max(E, R) + 1 < 2^31), v = -1
+    where the other end is outside the group, with the lower bound (out_key, out_id)
+    of the region there. Returns (decided (E,) bool, extinction (E,) int64 and pruned (E,)
     int64: the key and id of the region pruned across each decided edge; root (R,):
     each region's region after the merges, frozen (R,) bool, the regions' keys after
     the merges (the roots' exact), and the decided edges in the order decided, which
@@ -59,7 +60,7 @@ def prune_group(key, rid, u, v, out_key, out_id):
     key = key.copy()
     child, sibling, prev, stack, heap_of, low_key, low_id = _edge_heaps(
         n_reg, u, v, out_key, out_id)
-    parent = np.arange(n_reg)
+    parent = np.arange(n_reg).astype(u.dtype)
     frozen = np.zeros(n_reg, dtype=np.bool_)
     blocked = np.zeros(n_reg, dtype=np.bool_)
     decided = np.zeros(n_ev, dtype=np.bool_)
@@ -100,11 +101,11 @@ def _edge_heaps(n_reg, u, v, out_key, out_id):
     """Each region's pairing heap of its edges (entry 2e at u's end, 2e + 1 at v's)
     and the least lower bound (low_key, low_id) of the regions outside it touches."""
     n_ev = len(u)
-    child = np.full(2 * n_ev, -1, dtype=np.int64)
-    sibling = np.full(2 * n_ev, -1, dtype=np.int64)
-    prev = np.full(2 * n_ev, -1, dtype=np.int64)
-    stack = np.empty(2 * n_ev + 1, dtype=np.int64)
-    heap_of = np.full(n_reg, -1, dtype=np.int64)
+    child = np.full(2 * n_ev, -1, dtype=u.dtype)
+    sibling = np.full(2 * n_ev, -1, dtype=u.dtype)
+    prev = np.full(2 * n_ev, -1, dtype=u.dtype)
+    stack = np.empty(2 * n_ev + 1, dtype=u.dtype)
+    heap_of = np.full(n_reg, -1, dtype=u.dtype)
     low_key = np.full(n_reg, _NONE, dtype=np.int64)
     low_id = np.full(n_reg, -1, dtype=np.int64)
     for e in range(n_ev):
@@ -122,8 +123,8 @@ def _region_heap(key, heap_of):
     the larger local index, which is the larger id."""
     n_reg = len(key)
     hkey = np.empty(n_reg, dtype=np.int64)
-    region = np.empty(n_reg, dtype=np.int64)
-    pos = np.full(n_reg, -1, dtype=np.int64)
+    region = np.empty(n_reg, dtype=heap_of.dtype)
+    pos = np.full(n_reg, -1, dtype=heap_of.dtype)
     n = 0
     for m in range(n_reg):
         if heap_of[m] >= 0:
@@ -199,9 +200,12 @@ class GroupState:
         (`prune_group`)."""
         u, v = self.local or (np.searchsorted(self.rid, self.a), np.where(
             self.b >= 0, np.searchsorted(self.rid, np.maximum(self.b, 0)), -1))
+        # int32 links and region indices where they fit: 25 % faster on a leaf of
+        # 130 000 regions (less memory to walk); one signature per index type.
+        index = np.int32 if 2 * max(len(u), len(self.rid)) + 1 < 2 ** 31 else np.int64
         decided, extinction, pruned, root, frozen, key, sequence = prune_group(
-            self.key, self.rid.astype(np.int64), u, v, self.out_key,     # one signature
-            self.out_id.astype(np.int64))
+            self.key, self.rid.astype(np.int64), u.astype(index), v.astype(index),
+            self.out_key, self.out_id.astype(np.int64))
         rest = ~decided
         ru, rv = root[u[rest]], root[np.maximum(v[rest], 0)]
         stays = np.flatnonzero(frozen)
