@@ -9,7 +9,7 @@
 import numba
 import numpy as np
 
-__all__ = ["distinct", "places", "is_in"]
+__all__ = ["distinct", "places", "is_in", "slot_of"]
 
 
 def distinct(values) -> np.ndarray:
@@ -73,7 +73,7 @@ def _first_seen(values, inverse):
     for i in range(len(values)):
         v = np.int64(values[i])
         if number < 0 or v != last:
-            h = _slot(keys, numbers, v, bits)
+            h = slot_of(keys, numbers, v, bits)
             if numbers[h] >= 0:
                 number = numbers[h]
             else:                                       # a new value
@@ -90,8 +90,10 @@ def _first_seen(values, inverse):
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _slot(keys, numbers, key, bits):
-    """The slot of `key` in a table of 2^bits (keys, numbers), -1 numbers empty."""
+def slot_of(keys, numbers, key, bits):
+    """The slot of integer `key` in an open-addressing table of 2^bits slots: `keys`,
+    and `numbers` < 0 where a slot is free (`keys` itself for a table of keys >= 0).
+    Fibonacci hashing (the top bits of key x 2^64 / golden ratio), linear probing."""
     mask = (1 << bits) - 1
     h = np.int64((np.uint64(key) * np.uint64(0x9E3779B97F4A7C15)) >> np.uint64(64 - bits))
     while numbers[h] >= 0 and keys[h] != key:
@@ -105,7 +107,7 @@ def _grown(seen, bits):
     keys = np.empty(1 << bits, dtype=np.int64)
     numbers = np.full(1 << bits, -1, dtype=np.int64)
     for k in range(len(seen)):
-        h = _slot(keys, numbers, seen[k], bits)
+        h = slot_of(keys, numbers, seen[k], bits)
         keys[h], numbers[h] = seen[k], k
     return keys, numbers
 

@@ -22,6 +22,7 @@ below t.
 import numba
 import numpy as np
 
+from .._distinct import slot_of
 from .._union_find import find_root
 
 
@@ -243,16 +244,6 @@ def cell_sums(cells, field, saddles, unit, hypervolume, out):
             out[cells[i]] += _term(cells, field, saddles, unit, hypervolume, i)
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
-def _slot(keys, key, bits):
-    """The slot of `key` in an open-addressing table of 2^bits int64 keys (-1 empty)."""
-    mask = (1 << bits) - 1
-    h = np.int64((np.uint64(key) * np.uint64(0x9E3779B97F4A7C15)) >> np.uint64(64 - bits))
-    while keys[h] >= 0 and keys[h] != key:
-        h = (h + 1) & mask
-    return h
-
-
 @numba.njit(cache=True, nogil=True)
 def _grown(keys, sums, bits):
     """The table (keys, sums) rehashed into 2^bits slots."""
@@ -260,7 +251,7 @@ def _grown(keys, sums, bits):
     grown_sums = np.zeros(1 << bits, dtype=np.int64)
     for k in range(len(keys)):
         if keys[k] >= 0:
-            at = _slot(grown, keys[k], bits)
+            at = slot_of(grown, grown, keys[k], bits)
             grown[at], grown_sums[at] = keys[k], sums[k]
     return grown, grown_sums
 
@@ -279,12 +270,12 @@ def block_sums(cells, field, saddles, unit, hypervolume):
         if c < 0:
             continue
         if c != last:
-            slot = _slot(keys, c, bits)
+            slot = slot_of(keys, keys, c, bits)
             if keys[slot] < 0:                          # a new cell
                 if 2 * (used + 1) > len(keys):
                     bits += 1
                     keys, sums = _grown(keys, sums, bits)
-                    slot = _slot(keys, c, bits)
+                    slot = slot_of(keys, keys, c, bits)
                 keys[slot] = c
                 used += 1
             last = c
