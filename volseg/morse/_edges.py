@@ -115,13 +115,16 @@ def spanning_forest(keys, saddle, edge_a, edge_b, n_cells):
     """
     keep = np.zeros(len(edge_a), dtype=bool)
     parent = np.arange(n_cells, dtype=np.int64)
-    first = min(len(keys), _FIRST_EDGES_PER_CELL * n_cells)
-    pivot = np.partition(keys, len(keys) - first)[len(keys) - first] if first else np.inf
-    high = np.flatnonzero(keys > pivot) if first < len(keys) else np.arange(len(keys))
+    first = _FIRST_EDGES_PER_CELL * n_cells
+    if first >= len(keys):                  # few edges: one sort
+        _kernels.spanning_edges(edge_a, edge_b, _saddle_order(keys, saddle, edge_a, edge_b),
+                                parent, keep)
+        return keep
+    pivot = np.partition(keys, len(keys) - first)[len(keys) - first]
+    high = np.flatnonzero(keys > pivot)
     _kernels.spanning_edges(edge_a, edge_b, _saddle_order(keys, saddle, edge_a, edge_b, high),
                             parent, keep)
-    if first < len(keys):
-        low = _kernels.apart(edge_a, edge_b, np.flatnonzero(keys <= pivot), parent)
-        _kernels.spanning_edges(edge_a, edge_b, _saddle_order(keys, saddle, edge_a, edge_b, low),
-                                parent, keep)
+    low = _kernels.apart(edge_a, edge_b, np.flatnonzero(keys <= pivot), parent)
+    _kernels.spanning_edges(edge_a, edge_b, _saddle_order(keys, saddle, edge_a, edge_b, low),
+                            parent, keep)
     return keep
