@@ -204,8 +204,8 @@ class GroupState:
         # 130 000 regions (less memory to walk); one signature per index type.
         index = np.int32 if 2 * max(len(u), len(self.rid)) + 1 < 2 ** 31 else np.int64
         decided, extinction, pruned, root, frozen, key, sequence = prune_group(
-            self.key, self.rid.astype(np.int64), u.astype(index), v.astype(index),
-            self.out_key, self.out_id.astype(np.int64))
+            self.key, self.rid.astype(np.int64), u.astype(index, copy=False),
+            v.astype(index, copy=False), self.out_key, self.out_id.astype(np.int64))
         rest = ~decided
         ru, rv = root[u[rest]], root[np.maximum(v[rest], 0)]
         stays = np.flatnonzero(frozen)
