@@ -4,7 +4,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from volseg._distinct import distinct, is_in, places
+from volseg._distinct import distinct, index_type, is_in, places
 
 
 @given(arrays(st.sampled_from([np.int32, np.int64, np.uint8]), st.integers(0, 3).map(
@@ -54,3 +54,13 @@ def test_places_refuses_floats():
               elements=st.integers(-4, 6)))
 def test_is_in_is_np_isin(values, ids):
     np.testing.assert_array_equal(is_in(values, ids), np.isin(values, ids))
+
+
+def test_index_type_is_int32_up_to_its_largest_value_then_int64():
+    top = np.iinfo(np.int32).max
+    assert index_type(0) is np.int32 and index_type(top) is np.int32
+    assert index_type(top + 1) is np.int64 and index_type(2 ** 40) is np.int64
+    # Every value up to the largest fits the type chosen, -1 too.
+    for largest in (0, 7, top, top + 1):
+        info = np.iinfo(index_type(largest))
+        assert info.min <= -1 and largest <= info.max

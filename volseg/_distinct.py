@@ -3,13 +3,20 @@
 - `distinct`: the sorted distinct values, by a sort;
 - `places`: the same, and each value's place among them (``np.unique``'s inverse),
   by a hash table;
-- `is_in`: ``np.isin`` by a sort.
+- `is_in`: ``np.isin`` by a sort;
+- `index_type`: int32 for ids and links where they fit, else int64.
 """
 
 import numba
 import numpy as np
 
-__all__ = ["distinct", "places", "is_in", "slot_of"]
+__all__ = ["distinct", "places", "is_in", "slot_of", "index_type"]
+
+
+def index_type(largest: int):
+    """The integer type of an array whose values lie in [-1, `largest`]: int32 where
+    `largest` fits it (half the memory to walk), else int64."""
+    return np.int32 if largest <= np.iinfo(np.int32).max else np.int64
 
 
 def distinct(values) -> np.ndarray:

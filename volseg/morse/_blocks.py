@@ -35,6 +35,7 @@ result (`volseg.cuts`), nothing per maximum or per voxel (tested).
 
 from __future__ import annotations
 
+import math
 import operator
 import os
 import shutil
@@ -44,7 +45,7 @@ import numpy as np
 
 from .. import _atomic
 from .._block_hooks import BlockHooks
-from .._distinct import places
+from .._distinct import index_type, places
 from .._halo import block_starts, with_halo
 from .._task_graph import TaskGraph, _one_object
 from . import _block_kernels as kernels
@@ -147,7 +148,7 @@ def _pairs_of_block(halo_values, halo_cells, origin, shape, offsets):
     owned = np.arange(values.size).reshape(values.shape)[1:-1, 1:-1, 1:-1].ravel()
     owned = owned[values.ravel()[owned] > -np.inf]         # the block's voxels in the mask
     # 4-byte voxel ids below 2^31 voxels (up to 1290^3)
-    gid_type = np.int32 if np.prod(shape) < 2**31 else np.int64
+    gid_type = index_type(math.prod(shape))
     if not len(owned):
         nothing = np.zeros(0, dtype=halo_cells.dtype)
         return (nothing, nothing, np.zeros(0, dtype=gid_type), np.zeros(0), *faces)
@@ -360,7 +361,7 @@ def _ids_and_exits(ascent, grid: _Grid, hooks) -> tuple:
     for index, table in zip(order, tables, strict=True):
         grid_of_tables[index] = da.from_delayed(table, shape=(1, 1, 1), dtype=object)
     return (da.block(grid_of_tables.tolist()),
-            _Maxima(int(n_maxima), np.int32 if n_maxima < 2**31 - 1 else np.int64, buckets,
+            _Maxima(int(n_maxima), index_type(int(n_maxima) + 1), buckets,
                     low_high))
 
 

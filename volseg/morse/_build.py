@@ -9,6 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .._distinct import index_type
 from . import _kernels as kernels
 from ._edges import _cross_edges, _saddle_order, spanning_forest
 from ._graph import _Neighbourhood, _neighbourhood, _validate_field
@@ -21,18 +22,18 @@ __all__ = ["descending_complex"]
 def _descending_cells(graph: _Neighbourhood, phases: _Phases):
     """(cell per node, -1 off the vertices; maxima nodes by decreasing value): cell[v] is
     the id of the maximum v's steepest ascent reaches."""
-    index_type = np.int32 if len(graph.values) < 2**31 - 1 else np.int64
-    up = np.empty(len(graph.values), dtype=index_type)
+    index = index_type(len(graph.values) + 1)
+    up = np.empty(len(graph.values), dtype=index)
     kernels.steepest_ascent(graph.values, graph.vertices, graph.grid, graph.offsets,
                             graph.indptr, graph.indices, up)
     phases.done("steepest ascent")
-    cell = np.full(len(graph.values), -1, dtype=index_type)
+    cell = np.full(len(graph.values), -1, dtype=index)
     kernels.resolve_cells(graph.vertices, up, cell)
     phases.done("path compression")
     maxima = kernels.roots(graph.vertices, up)
     # Maximum ids by decreasing value (simulation of simplicity: then by index).
     maxima = maxima[np.lexsort((maxima, graph.values[maxima]))[::-1]]
-    up[maxima] = np.arange(len(maxima), dtype=index_type)  # up is free now: root -> id
+    up[maxima] = np.arange(len(maxima), dtype=index)  # up is free now: root -> id
     kernels.relabel(graph.vertices, cell, up)
     phases.done("maxima order and relabel")
     return cell, maxima

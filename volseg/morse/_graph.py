@@ -10,7 +10,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .. import _kuhn
-from .._distinct import distinct
+from .._distinct import distinct, index_type
 
 __all__ = ["grid_offsets"]
 
@@ -159,10 +159,10 @@ def _neighbourhood(values, mask, adjacency, connectivity) -> _Neighbourhood:
     padded = np.pad(values if mask is None else np.where(mask, values, -np.inf), 1,
                     constant_values=-np.inf)
     strides = np.array([s // padded.itemsize for s in padded.strides], dtype=np.int64)
-    index_type = np.int32 if padded.size < 2**31 - 1 else np.int64
-    node = np.zeros((1,) * values.ndim, dtype=index_type)
+    index = index_type(padded.size + 1)
+    node = np.zeros((1,) * values.ndim, dtype=index)
     for axis, (size, stride) in enumerate(zip(values.shape, strides, strict=True)):
-        step = ((np.arange(size) + 1) * stride).astype(index_type)
+        step = ((np.arange(size) + 1) * stride).astype(index)
         node = node + step.reshape([-1 if a == axis else 1 for a in range(values.ndim)])
     vertices = node.ravel() if mask is None else node[mask]
     dummy = np.zeros(1, dtype=np.int64)

@@ -22,7 +22,7 @@ below t.
 import numba
 import numpy as np
 
-from .._distinct import slot_of
+from .._distinct import index_type, slot_of
 from .._union_find import find_root
 
 
@@ -151,8 +151,7 @@ def prune(source, target, n_max, base, order, extinction):
     events' heaps and 24 per maximum for the regions' (against 64 and 48).
     """
     n_ev = len(source)
-    link = np.int32 if 2 * n_ev + 1 < 2 ** 31 else np.int64
-    index = np.int32 if n_max < 2 ** 31 else np.int64
+    link, index = index_type(2 * n_ev + 1), index_type(n_max)
     child, sibling, prev = (np.full(2 * n_ev, -1, dtype=link) for _ in range(3))
     return prune_events(source, target, base, order, extinction, child, sibling, prev,
                         np.empty(2 * n_ev + 1, dtype=link), np.arange(n_max, dtype=index))

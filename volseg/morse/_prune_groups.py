@@ -33,6 +33,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from .._distinct import index_type
 from .._union_find import find_root
 from ._group_tree import block_tree
 from ._prune import _before, _joined, _meld, _rekeyed, _remove, _sift_down
@@ -202,7 +203,7 @@ class GroupState:
             self.b >= 0, np.searchsorted(self.rid, np.maximum(self.b, 0)), -1))
         # int32 links and region indices where they fit: 25 % faster on a leaf of
         # 130 000 regions (less memory to walk); one signature per index type.
-        index = np.int32 if 2 * max(len(u), len(self.rid)) + 1 < 2 ** 31 else np.int64
+        index = index_type(2 * max(len(u), len(self.rid)) + 1)
         decided, extinction, pruned, root, frozen, key, sequence = prune_group(
             self.key, self.rid.astype(np.int64), u.astype(index, copy=False),
             v.astype(index, copy=False), self.out_key, self.out_id.astype(np.int64))
@@ -239,7 +240,7 @@ def leaves(source, target, base, leaf_of, n_leaves) -> list:
     maximum's leaf) and the events touching them, bucketed in one compiled pass each
     (`_bucketed`). Indices are int32 where they fit: about 28 bytes per event and end
     outside its leaf."""
-    index = np.int32 if max(len(source), len(leaf_of), n_leaves) < 2 ** 31 else np.int64
+    index = index_type(max(len(source), len(leaf_of), n_leaves))
     leaf_of = leaf_of.astype(index, copy=False)
     by_leaf, max_at = _maxima_bucketed(leaf_of, n_leaves)
     event, near, far, at = _bucketed(source, target, leaf_of, n_leaves)
@@ -352,8 +353,7 @@ def merge_order(event, extinction, pruned, starts) -> np.ndarray:
     """The sequential pruning's order of the decided merges, by extinction, ties the
     larger pruned id first (module docstring): the groups' lists, each in that order
     already (from `starts`, (k + 1,)), merged."""
-    index = np.int32 if len(event) < 2 ** 31 else np.int64
-    ids = np.int32 if len(pruned) == 0 or pruned.max() < 2 ** 31 else np.int64
+    index, ids = index_type(len(event)), index_type(int(pruned.max(initial=0)))
     return event[_merged_runs(extinction.copy(), pruned.astype(ids),
                               np.arange(len(event), dtype=index), np.asarray(starts, np.int64))]
 
