@@ -31,36 +31,48 @@ def ascend(halo, origin, shape, offsets, result):
     reaches inside the block, or -1 - gid of the first voxel outside the block on it,
     or `OUTSIDE` for a voxel of value -inf (outside the mask).
 
-    halo: (a+2, b+2, c+2) float64; origin: global index of owned voxel (0, 0, 0);
-    shape: the volume's shape; offsets: (m, 3) neighbour steps; result: (a, b, c) int64.
+    halo: (a+2, b+2, c+2) float64, C-contiguous; origin: global index of owned voxel
+    (0, 0, 0); shape: the volume's shape; offsets: (m, 3) neighbour steps; result:
+    (a, b, c) int64, C-contiguous.
+
+    The halo's flat index orders its voxels as their gids do (both are C order, and
+    the halo's voxels outside the volume are -inf, never chosen), so a tie is broken
+    by the neighbours' flat steps and no gid is computed but an exit's or a maximum's:
+    0.12 s per 128^3 block against 0.20 s with a gid per neighbour.
     """
     a, b, c = result.shape
     n = a * b * c
+    hb, hc = b + 2, c + 2
+    flat = halo.reshape(-1)
+    m = offsets.shape[0]
+    steps = np.empty(m, dtype=np.int64)
+    for t in range(m):
+        steps[t] = (offsets[t, 0] * hb + offsets[t, 1]) * hc + offsets[t, 2]
     up = np.empty(n, dtype=np.int64)       # local index, or -1 - gid when outside
     for i in range(a):
         for j in range(b):
+            row, halo_row = (i * b + j) * c, ((i + 1) * hb + (j + 1)) * hc + 1
             for k in range(c):
-                own = (i * b + j) * c + k
-                best_v = halo[i + 1, j + 1, k + 1]
-                if best_v == -np.inf:     # outside the mask: its own "maximum", no one
-                    up[own] = own         # climbs to it (relabelled OUTSIDE below)
+                own, h = row + k, halo_row + k
+                best_v = flat[h]
+                up[own] = own             # a maximum, or outside the mask: no one climbs
+                if best_v == -np.inf:     # to it (relabelled OUTSIDE below)
                     continue
-                best_g = _gid(i, j, k, origin, shape)
-                bi, bj, bk = i, j, k
-                for t in range(offsets.shape[0]):
-                    di, dj, dk = offsets[t, 0], offsets[t, 1], offsets[t, 2]
-                    value = halo[i + 1 + di, j + 1 + dj, k + 1 + dk]
-                    if value == -np.inf:
-                        continue
-                    g = _gid(i + di, j + dj, k + dk, origin, shape)
-                    if value > best_v or (value == best_v and g > best_g):
-                        best_v, best_g, bi, bj, bk = value, g, i + di, j + dj, k + dk
+                best_s, best_t = 0, -1
+                for t in range(m):
+                    value = flat[h + steps[t]]
+                    if value > best_v or (value == best_v and steps[t] > best_s):
+                        best_v, best_s, best_t = value, steps[t], t
+                if best_t < 0:
+                    continue
+                bi, bj, bk = i + offsets[best_t, 0], j + offsets[best_t, 1], k + offsets[best_t, 2]
                 if 0 <= bi < a and 0 <= bj < b and 0 <= bk < c:
                     up[own] = (bi * b + bj) * c + bk
                 else:
-                    up[own] = -1 - best_g
-    final = np.full(n, np.iinfo(np.int64).min, dtype=np.int64)
+                    up[own] = -1 - _gid(bi, bj, bk, origin, shape)
+    final = result.reshape(-1)
     unknown = np.iinfo(np.int64).min
+    final[:] = unknown
     for v in range(n):
         x = v
         while final[x] == unknown and up[x] >= 0 and up[x] != x:
@@ -79,10 +91,12 @@ def ascend(halo, origin, shape, offsets, result):
             if up[y] < 0 or up[y] == y:
                 break
             y = up[y]
-    for v in range(n):
-        i, r = divmod(v, b * c)
-        j, k = divmod(r, c)
-        result[i, j, k] = OUTSIDE if halo[i + 1, j + 1, k + 1] == -np.inf else final[v]
+    for i in range(a):
+        for j in range(b):
+            row, halo_row = (i * b + j) * c, ((i + 1) * hb + (j + 1)) * hc + 1
+            for k in range(c):
+                if flat[halo_row + k] == -np.inf:
+                    final[row + k] = OUTSIDE
 
 
 @numba.njit(cache=True, nogil=True)
