@@ -294,13 +294,12 @@ def _down(graph, tree, nodes: list) -> dict:
     return known
 
 
-def _by_bucket_of(firsts, results: list, column: int) -> list:
-    """Some groups' decided merges (tuples of columns) sorted and split by the bucket of
-    the id in `column`."""
+def _by_bucket_of(firsts, results: list) -> list:
+    """Some groups' decided merges (tuples of columns, the merged id first) sorted and
+    split by the bucket of that id."""
     columns = [np.concatenate([r[k] for r in results]) for k in range(len(results[0]))]
-    order = np.argsort(columns[column], kind="stable")
-    columns = [c[order] for c in columns]
-    return by_bucket(firsts, columns[column], *(c for k, c in enumerate(columns) if k != column))
+    order = np.argsort(columns[0], kind="stable")
+    return by_bucket(firsts, *(c[order] for c in columns))
 
 
 def _merges(bucket, pieces: list, scale: float, measure: str) -> Merges:
@@ -340,6 +339,6 @@ def pruned(buckets: list, firsts, sums: list, shape, scale: float, measure: str)
                                    graph.item(first[i], 2), known[i]) for i in leaves},
                  _merged_node)
     decided = [graph.item(n, 0) for n in second]
-    split = [graph(_by_bucket_of, firsts.key, part, 0) for part in batches(decided, len(buckets))]
+    split = [graph(_by_bucket_of, firsts.key, part) for part in batches(decided, len(buckets))]
     return graph.delayed([graph(_merges, b.key, [graph.item(s, j) for s in split], scale,
                                 measure) for j, b in enumerate(buckets)])
