@@ -391,19 +391,19 @@ def _bucket_count(n_blocks: int, n_voxels: int) -> int:
     return max(1, min(n_blocks, max(32, n_voxels // VOXELS_PER_BUCKET)))
 
 
-def _cells(halo, tables, chunks, grid: _Grid, index_type, hooks):
+def _cells(halo, tables, chunks, grid: _Grid, id_type, hooks):
     """Stage 3, lazy: the maximum id of every voxel, from the path ends kept in the
     scratch folder, or, without one, by climbing again from the halos."""
     import dask.array as da
 
-    meta = np.empty((0, 0, 0), index_type)
+    meta = np.empty((0, 0, 0), id_type)
     if grid.scratch is None:
         def cells_of(h, table, block_id=None):
             keys, ids = table.flat[0]
             return _cells_of_block(h, grid.origin(block_id), grid.shape, grid.offsets,
-                                   grid.masked, keys, ids.astype(index_type))
+                                   grid.masked, keys, ids.astype(id_type))
 
-        return halo.map_blocks(hooks.wrap("cells", cells_of), tables, dtype=index_type,
+        return halo.map_blocks(hooks.wrap("cells", cells_of), tables, dtype=id_type,
                                chunks=chunks, meta=meta)
 
     def cells_of_kept_ends(table, block_id=None):
@@ -414,9 +414,9 @@ def _cells(halo, tables, chunks, grid: _Grid, index_type, hooks):
             raise RuntimeError(f"block {block_id}'s path ends were expected in "
                                f"{grid.scratch} but are not there") from None
         keys, ids = table.flat[0]
-        return _cells_of_ends(ends, keys, ids.astype(index_type))
+        return _cells_of_ends(ends, keys, ids.astype(id_type))
 
-    return da.map_blocks(hooks.wrap("cells", cells_of_kept_ends), tables, dtype=index_type,
+    return da.map_blocks(hooks.wrap("cells", cells_of_kept_ends), tables, dtype=id_type,
                          chunks=chunks, meta=meta)
 
 
