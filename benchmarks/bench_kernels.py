@@ -2,6 +2,7 @@
 
     python benchmarks/bench_kernels.py --base 2118216       # the commit before the work
     python benchmarks/bench_kernels.py --base 2118216 --sizes 128 256 384 --morse 256 512
+    python benchmarks/bench_kernels.py --base 0ff3c76 --sigma 1 --morse   # a rougher field
 
 Grid curvature (weighted, Laplace-Beltrami) at each size: the base revision's kernel
 (a temporary git worktree), today's, and the floor kernel (`_floor.py`, the weighted
@@ -36,7 +37,7 @@ assert volseg.__file__.startswith({tree!r}), volseg.__file__
 from volseg.curvature import grid_curvature
 from volseg.morse import descending_complex
 def field(n):
-    f = gaussian_filter(np.random.default_rng(0).standard_normal((n, n, n)), 3)
+    f = gaussian_filter(np.random.default_rng(0).standard_normal((n, n, n)), {sigma})
     return np.round(255 * (f - f.min()) / np.ptp(f)).astype(np.uint8)
 def best(run, repeat):
     t = float("inf")
@@ -105,31 +106,34 @@ def main():
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--base", required=True, help="git revision of the old kernels")
     p.add_argument("--sizes", nargs="+", type=int, default=[128, 256, 384])
-    p.add_argument("--morse", nargs="+", type=int, default=[256, 512])
+    p.add_argument("--morse", nargs="*", type=int, default=[256, 512])
     p.add_argument("--repeat", type=int, default=2)
+    p.add_argument("--sigma", type=float, default=3.0,
+                   help="the test field's smoothing in voxels (smaller: rougher, more "
+                   "faces bent beyond the kernels' small-angle branch)")
     args = p.parse_args()
     with worktree(args.base) as base, tempfile.TemporaryDirectory() as tmp:
         for n in args.sizes:
-            floor = run(FLOOR, ROOT, n=n, repeat=args.repeat)["t"]
+            floor = run(FLOOR, ROOT, sigma=args.sigma, n=n, repeat=args.repeat)["t"]
             print(f"floor            {n}^3: {floor:7.3f} s ({n**3 / floor / 1e6:5.2f} M voxels/s)",
                   flush=True)
             for op in ["weighted", "laplace_beltrami"]:
-                old = run(CURVATURE, base, n=n, op=op, repeat=args.repeat)["t"]
-                new = run(CURVATURE, ROOT, n=n, op=op, repeat=args.repeat)["t"]
+                old = run(CURVATURE, base, sigma=args.sigma, n=n, op=op, repeat=args.repeat)["t"]
+                new = run(CURVATURE, ROOT, sigma=args.sigma, n=n, op=op, repeat=args.repeat)["t"]
                 print(f"{op:16s} {n}^3: base {old:7.3f} s, now {new:7.3f} s "
                       f"({n**3 / new / 1e6:5.2f} M voxels/s): {old / new:4.2f}x faster, "
                       f"{floor / new:4.0%} of the floor's speed", flush=True)
         volume, curvature = Path(tmp) / "volume.npy", Path(tmp) / "curvature.npy"
-        run(INPUTS, ROOT, n=256, volume=str(volume), curvature=str(curvature))
+        run(INPUTS, ROOT, sigma=args.sigma, n=256, volume=str(volume), curvature=str(curvature))
         for what in ["weighted", "laplace_beltrami", "morse"]:
             path = str(curvature if what == "morse" else volume)
-            old = run(MEMORY, base, what=what, path=path)["extra"]
-            new = run(MEMORY, ROOT, what=what, path=path)["extra"]
+            old = run(MEMORY, base, sigma=args.sigma, what=what, path=path)["extra"]
+            new = run(MEMORY, ROOT, sigma=args.sigma, what=what, path=path)["extra"]
             print(f"memory {what:16s} 256^3: base {old:5.1f}, now {new:5.1f} bytes/voxel "
                   "beyond the input", flush=True)
         for n in args.morse:
-            old = run(MORSE, base, n=n, repeat=args.repeat, phases=False)
-            new = run(MORSE, ROOT, n=n, repeat=args.repeat, phases=True)
+            old = run(MORSE, base, sigma=args.sigma, n=n, repeat=args.repeat, phases=False)
+            new = run(MORSE, ROOT, sigma=args.sigma, n=n, repeat=args.repeat, phases=True)
             print(f"morse            {n}^3 ({new['maxima']} maxima): base {old['t']:7.3f} s, "
                   f"now {new['t']:7.3f} s: {old['t'] / new['t']:4.2f}x faster", flush=True)
             print("    phases now: " + ", ".join(f"{k} {v:.2f} s"

@@ -12,8 +12,12 @@ INNER = (slice(1, -1),) * 3
 
 @pytest.mark.parametrize("operator", ALL)
 @pytest.mark.parametrize("spacing, scale", [((1, 1, 1), 1.0), ((0.7, 1.0, 1.3), 0.4)])
-def test_grid_equals_explicit_mesh_at_interior_voxels(operator, spacing, scale, rng):
-    f = 3 * smooth_random_field((9, 10, 11), rng, sigma=1.5)
+@pytest.mark.parametrize("rough", [False, True])
+def test_grid_equals_explicit_mesh_at_interior_voxels(operator, spacing, scale, rough, rng):
+    # Rough: white noise, so that many faces bend by more than 33 degrees (obtuse too)
+    # and the kernels' angles take their reduced branch (`_atan`).
+    f = (10 * rng.standard_normal((9, 10, 11)) if rough
+         else 3 * smooth_random_field((9, 10, 11), rng, sigma=1.5))
     v, t = tessellation.kuhn_grid_mesh(f, spacing=spacing, value_scale=scale)
     mesh_h = vertex_curvature(v, t, operator).reshape(f.shape)[INNER]
     grid_h = grid_curvature(f, operator, spacing=spacing, value_scale=scale)[INNER]

@@ -9,8 +9,11 @@ are processed in two passes (even, then odd slabs) so that parallel slabs never
 write the same vertex.
 
 The per-operator work of the extrinsic operators and Laplace-Beltrami is unrolled in
-`_grid_stencil.py` (generated from the tables by `_stencil_codegen.py`); the
-intrinsic operator, not on any hot path, reads the tables at run time here.
+`_grid_stencil.py` (generated from the tables by `_stencil_codegen.py`), their face
+angles by `_atan`; the intrinsic operator, not on any hot path, reads the tables at
+run time here. (numba's cache keys a kernel on its own file only: after changing a
+kernel it calls from another module, touch this file or clear `__pycache__`, or the
+cached `grid_kernel` keeps the old callee.)
 """
 
 import math

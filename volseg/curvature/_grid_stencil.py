@@ -11,6 +11,8 @@ import math
 
 import numba
 
+from ._atan import angle_times_root
+
 
 @numba.njit(cache=True, nogil=True)
 def weighted_slab(fpf, shape, i, h, cross2, acc0, acc1):
@@ -98,180 +100,192 @@ def weighted_slab(fpf, shape, i, h, cross2, acc0, acc1):
             cx = g0y * g1z - g0z * g1y
             cy = g0z * g1x - g0x * g1z
             cz = g0x * g1y - g0y * g1x
-            psi = math.atan2(math.sqrt(dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz), 1.0 + g0x * g1x + g0y * g1y + g0z * g1z)
-            if dx * hx + dz * hz > 0.0:
-                psi = -psi
+            s2 = dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz
+            c = 1.0 + g0x * g1x + g0y * g1y + g0z * g1z
             du = f4 - f0
             dv = f7 - f0
             mx = du * hx - (dv * hx)
             my = du * hy
             mz = du * hz
-            psi *= 0.5 * math.sqrt(c2_0 + mx * mx + my * my + mz * mz)
+            psi = 0.5 * angle_times_root(s2, c, c2_0 + mx * mx + my * my + mz * mz)
+            if dx * hx + dz * hz > 0.0:
+                psi = -psi
             p0 = psi
             # face 1: corners [0, 6, 7], tetrahedra 0 and 2
             dx, dy, dz = g2x - g0x, g2y - g0y, g2z - g0z
             cx = g0y * g2z - g0z * g2y
             cy = g0z * g2x - g0x * g2z
             cz = g0x * g2y - g0y * g2x
-            psi = math.atan2(math.sqrt(dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz), 1.0 + g0x * g2x + g0y * g2y + g0z * g2z)
-            if dy * hy > 0.0:
-                psi = -psi
+            s2 = dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz
+            c = 1.0 + g0x * g2x + g0y * g2y + g0z * g2z
             du = f6 - f0
             dv = f7 - f0
             mx = du * hx - (dv * hx)
             my = du * hy - (dv * hy)
             mz = du * hz
-            psi *= 0.5 * math.sqrt(c2_1 + mx * mx + my * my + mz * mz)
+            psi = 0.5 * angle_times_root(s2, c, c2_1 + mx * mx + my * my + mz * mz)
+            if dy * hy > 0.0:
+                psi = -psi
             p1 = psi
             # face 2: corners [0, 4, 6], tetrahedra 0 and 6
             dx, dy, dz = g6x - g0x, g6y - g0y, g6z - g0z
             cx = g0y * g6z - g0z * g6y
             cy = g0z * g6x - g0x * g6z
             cz = g0x * g6y - g0y * g6x
-            psi = math.atan2(math.sqrt(dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz), 1.0 + g0x * g6x + g0y * g6y + g0z * g6z)
-            if -dz * hz > 0.0:
-                psi = -psi
+            s2 = dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz
+            c = 1.0 + g0x * g6x + g0y * g6y + g0z * g6z
             du = f4 - f0
             dv = f6 - f0
             mx = du * hx - (dv * hx)
             my = du * hy
             mz = 0.0
-            psi *= 0.5 * math.sqrt(c2_2 + mx * mx + my * my + mz * mz)
+            psi = 0.5 * angle_times_root(s2, c, c2_2 + mx * mx + my * my + mz * mz)
+            if -dz * hz > 0.0:
+                psi = -psi
             p2 = psi if k > 0 else 0.0
             # face 3: corners [0, 5, 7], tetrahedra 1 and 4
             dx, dy, dz = g4x - g1x, g4y - g1y, g4z - g1z
             cx = g1y * g4z - g1z * g4y
             cy = g1z * g4x - g1x * g4z
             cz = g1x * g4y - g1y * g4x
-            psi = math.atan2(math.sqrt(dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz), 1.0 + g1x * g4x + g1y * g4y + g1z * g4z)
-            if dz * hz > 0.0:
-                psi = -psi
+            s2 = dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz
+            c = 1.0 + g1x * g4x + g1y * g4y + g1z * g4z
             du = f5 - f0
             dv = f7 - f0
             mx = du * hx - (dv * hx)
             my = du * hy
             mz = du * hz - (dv * hz)
-            psi *= 0.5 * math.sqrt(c2_3 + mx * mx + my * my + mz * mz)
+            psi = 0.5 * angle_times_root(s2, c, c2_3 + mx * mx + my * my + mz * mz)
+            if dz * hz > 0.0:
+                psi = -psi
             p3 = psi
             # face 4: corners [0, 4, 5], tetrahedra 1 and 7
             dx, dy, dz = g7x - g1x, g7y - g1y, g7z - g1z
             cx = g1y * g7z - g1z * g7y
             cy = g1z * g7x - g1x * g7z
             cz = g1x * g7y - g1y * g7x
-            psi = math.atan2(math.sqrt(dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz), 1.0 + g1x * g7x + g1y * g7y + g1z * g7z)
-            if -dy * hy > 0.0:
-                psi = -psi
+            s2 = dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz
+            c = 1.0 + g1x * g7x + g1y * g7y + g1z * g7z
             du = f4 - f0
             dv = f5 - f0
             mx = du * hx - (dv * hx)
             my = 0.0
             mz = du * hz
-            psi *= 0.5 * math.sqrt(c2_4 + mx * mx + my * my + mz * mz)
+            psi = 0.5 * angle_times_root(s2, c, c2_4 + mx * mx + my * my + mz * mz)
+            if -dy * hy > 0.0:
+                psi = -psi
             p4 = psi if j > 0 else 0.0
             # face 5: corners [0, 2, 7], tetrahedra 2 and 3
             dx, dy, dz = g3x - g2x, g3y - g2y, g3z - g2z
             cx = g2y * g3z - g2z * g3y
             cy = g2z * g3x - g2x * g3z
             cz = g2x * g3y - g2y * g3x
-            psi = math.atan2(math.sqrt(dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz), 1.0 + g2x * g3x + g2y * g3y + g2z * g3z)
-            if dy * hy + dz * hz > 0.0:
-                psi = -psi
+            s2 = dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz
+            c = 1.0 + g2x * g3x + g2y * g3y + g2z * g3z
             du = f2 - f0
             dv = f7 - f0
             mx = du * hx
             my = du * hy - (dv * hy)
             mz = du * hz
-            psi *= 0.5 * math.sqrt(c2_5 + mx * mx + my * my + mz * mz)
+            psi = 0.5 * angle_times_root(s2, c, c2_5 + mx * mx + my * my + mz * mz)
+            if dy * hy + dz * hz > 0.0:
+                psi = -psi
             p5 = psi
             # face 6: corners [0, 2, 6], tetrahedra 2 and 8
             dx, dy, dz = g8x - g2x, g8y - g2y, g8z - g2z
             cx = g2y * g8z - g2z * g8y
             cy = g2z * g8x - g2x * g8z
             cz = g2x * g8y - g2y * g8x
-            psi = math.atan2(math.sqrt(dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz), 1.0 + g2x * g8x + g2y * g8y + g2z * g8z)
-            if -dz * hz > 0.0:
-                psi = -psi
+            s2 = dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz
+            c = 1.0 + g2x * g8x + g2y * g8y + g2z * g8z
             du = f2 - f0
             dv = f6 - f0
             mx = du * hx
             my = du * hy - (dv * hy)
             mz = 0.0
-            psi *= 0.5 * math.sqrt(c2_6 + mx * mx + my * my + mz * mz)
+            psi = 0.5 * angle_times_root(s2, c, c2_6 + mx * mx + my * my + mz * mz)
+            if -dz * hz > 0.0:
+                psi = -psi
             p6 = psi if k > 0 else 0.0
             # face 7: corners [0, 3, 7], tetrahedra 3 and 5
             dx, dy, dz = g5x - g3x, g5y - g3y, g5z - g3z
             cx = g3y * g5z - g3z * g5y
             cy = g3z * g5x - g3x * g5z
             cz = g3x * g5y - g3y * g5x
-            psi = math.atan2(math.sqrt(dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz), 1.0 + g3x * g5x + g3y * g5y + g3z * g5z)
-            if dz * hz > 0.0:
-                psi = -psi
+            s2 = dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz
+            c = 1.0 + g3x * g5x + g3y * g5y + g3z * g5z
             du = f3 - f0
             dv = f7 - f0
             mx = du * hx
             my = du * hy - (dv * hy)
             mz = du * hz - (dv * hz)
-            psi *= 0.5 * math.sqrt(c2_7 + mx * mx + my * my + mz * mz)
+            psi = 0.5 * angle_times_root(s2, c, c2_7 + mx * mx + my * my + mz * mz)
+            if dz * hz > 0.0:
+                psi = -psi
             p7 = psi
             # face 8: corners [0, 2, 3], tetrahedra 3 and 9
             dx, dy, dz = g9x - g3x, g9y - g3y, g9z - g3z
             cx = g3y * g9z - g3z * g9y
             cy = g3z * g9x - g3x * g9z
             cz = g3x * g9y - g3y * g9x
-            psi = math.atan2(math.sqrt(dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz), 1.0 + g3x * g9x + g3y * g9y + g3z * g9z)
-            if -dx * hx > 0.0:
-                psi = -psi
+            s2 = dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz
+            c = 1.0 + g3x * g9x + g3y * g9y + g3z * g9z
             du = f2 - f0
             dv = f3 - f0
             mx = 0.0
             my = du * hy - (dv * hy)
             mz = du * hz
-            psi *= 0.5 * math.sqrt(c2_8 + mx * mx + my * my + mz * mz)
+            psi = 0.5 * angle_times_root(s2, c, c2_8 + mx * mx + my * my + mz * mz)
+            if -dx * hx > 0.0:
+                psi = -psi
             p8 = psi if i > 0 else 0.0
             # face 9: corners [0, 1, 7], tetrahedra 4 and 5
             dx, dy, dz = g5x - g4x, g5y - g4y, g5z - g4z
             cx = g4y * g5z - g4z * g5y
             cy = g4z * g5x - g4x * g5z
             cz = g4x * g5y - g4y * g5x
-            psi = math.atan2(math.sqrt(dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz), 1.0 + g4x * g5x + g4y * g5y + g4z * g5z)
-            if dy * hy + dz * hz > 0.0:
-                psi = -psi
+            s2 = dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz
+            c = 1.0 + g4x * g5x + g4y * g5y + g4z * g5z
             du = f1 - f0
             dv = f7 - f0
             mx = du * hx
             my = du * hy
             mz = du * hz - (dv * hz)
-            psi *= 0.5 * math.sqrt(c2_9 + mx * mx + my * my + mz * mz)
+            psi = 0.5 * angle_times_root(s2, c, c2_9 + mx * mx + my * my + mz * mz)
+            if dy * hy + dz * hz > 0.0:
+                psi = -psi
             p9 = psi
             # face 10: corners [0, 1, 5], tetrahedra 4 and 10
             dx, dy, dz = g10x - g4x, g10y - g4y, g10z - g4z
             cx = g4y * g10z - g4z * g10y
             cy = g4z * g10x - g4x * g10z
             cz = g4x * g10y - g4y * g10x
-            psi = math.atan2(math.sqrt(dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz), 1.0 + g4x * g10x + g4y * g10y + g4z * g10z)
-            if -dy * hy > 0.0:
-                psi = -psi
+            s2 = dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz
+            c = 1.0 + g4x * g10x + g4y * g10y + g4z * g10z
             du = f1 - f0
             dv = f5 - f0
             mx = du * hx
             my = 0.0
             mz = du * hz - (dv * hz)
-            psi *= 0.5 * math.sqrt(c2_10 + mx * mx + my * my + mz * mz)
+            psi = 0.5 * angle_times_root(s2, c, c2_10 + mx * mx + my * my + mz * mz)
+            if -dy * hy > 0.0:
+                psi = -psi
             p10 = psi if j > 0 else 0.0
             # face 11: corners [0, 1, 3], tetrahedra 5 and 11
             dx, dy, dz = g11x - g5x, g11y - g5y, g11z - g5z
             cx = g5y * g11z - g5z * g11y
             cy = g5z * g11x - g5x * g11z
             cz = g5x * g11y - g5y * g11x
-            psi = math.atan2(math.sqrt(dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz), 1.0 + g5x * g11x + g5y * g11y + g5z * g11z)
-            if -dx * hx > 0.0:
-                psi = -psi
+            s2 = dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz
+            c = 1.0 + g5x * g11x + g5y * g11y + g5z * g11z
             du = f1 - f0
             dv = f3 - f0
             mx = 0.0
             my = du * hy
             mz = du * hz - (dv * hz)
-            psi *= 0.5 * math.sqrt(c2_11 + mx * mx + my * my + mz * mz)
+            psi = 0.5 * angle_times_root(s2, c, c2_11 + mx * mx + my * my + mz * mz)
+            if -dx * hx > 0.0:
+                psi = -psi
             p11 = psi if i > 0 else 0.0
             w0 = 0.25 * v0 * math.sqrt(1.0 + g0x * g0x + g0y * g0y + g0z * g0z)
             w1 = 0.25 * v0 * math.sqrt(1.0 + g1x * g1x + g1y * g1y + g1z * g1z)
@@ -371,7 +385,9 @@ def unweighted_slab(fpf, shape, i, h, cross2, acc0, acc1):
             cx = g0y * g1z - g0z * g1y
             cy = g0z * g1x - g0x * g1z
             cz = g0x * g1y - g0y * g1x
-            psi = math.atan2(math.sqrt(dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz), 1.0 + g0x * g1x + g0y * g1y + g0z * g1z)
+            s2 = dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz
+            c = 1.0 + g0x * g1x + g0y * g1y + g0z * g1z
+            psi = angle_times_root(s2, c, 1.0)
             if dx * hx + dz * hz > 0.0:
                 psi = -psi
             p0 = psi
@@ -380,7 +396,9 @@ def unweighted_slab(fpf, shape, i, h, cross2, acc0, acc1):
             cx = g0y * g2z - g0z * g2y
             cy = g0z * g2x - g0x * g2z
             cz = g0x * g2y - g0y * g2x
-            psi = math.atan2(math.sqrt(dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz), 1.0 + g0x * g2x + g0y * g2y + g0z * g2z)
+            s2 = dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz
+            c = 1.0 + g0x * g2x + g0y * g2y + g0z * g2z
+            psi = angle_times_root(s2, c, 1.0)
             if dy * hy > 0.0:
                 psi = -psi
             p1 = psi
@@ -389,7 +407,9 @@ def unweighted_slab(fpf, shape, i, h, cross2, acc0, acc1):
             cx = g0y * g6z - g0z * g6y
             cy = g0z * g6x - g0x * g6z
             cz = g0x * g6y - g0y * g6x
-            psi = math.atan2(math.sqrt(dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz), 1.0 + g0x * g6x + g0y * g6y + g0z * g6z)
+            s2 = dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz
+            c = 1.0 + g0x * g6x + g0y * g6y + g0z * g6z
+            psi = angle_times_root(s2, c, 1.0)
             if -dz * hz > 0.0:
                 psi = -psi
             p2 = psi if k > 0 else 0.0
@@ -398,7 +418,9 @@ def unweighted_slab(fpf, shape, i, h, cross2, acc0, acc1):
             cx = g1y * g4z - g1z * g4y
             cy = g1z * g4x - g1x * g4z
             cz = g1x * g4y - g1y * g4x
-            psi = math.atan2(math.sqrt(dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz), 1.0 + g1x * g4x + g1y * g4y + g1z * g4z)
+            s2 = dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz
+            c = 1.0 + g1x * g4x + g1y * g4y + g1z * g4z
+            psi = angle_times_root(s2, c, 1.0)
             if dz * hz > 0.0:
                 psi = -psi
             p3 = psi
@@ -407,7 +429,9 @@ def unweighted_slab(fpf, shape, i, h, cross2, acc0, acc1):
             cx = g1y * g7z - g1z * g7y
             cy = g1z * g7x - g1x * g7z
             cz = g1x * g7y - g1y * g7x
-            psi = math.atan2(math.sqrt(dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz), 1.0 + g1x * g7x + g1y * g7y + g1z * g7z)
+            s2 = dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz
+            c = 1.0 + g1x * g7x + g1y * g7y + g1z * g7z
+            psi = angle_times_root(s2, c, 1.0)
             if -dy * hy > 0.0:
                 psi = -psi
             p4 = psi if j > 0 else 0.0
@@ -416,7 +440,9 @@ def unweighted_slab(fpf, shape, i, h, cross2, acc0, acc1):
             cx = g2y * g3z - g2z * g3y
             cy = g2z * g3x - g2x * g3z
             cz = g2x * g3y - g2y * g3x
-            psi = math.atan2(math.sqrt(dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz), 1.0 + g2x * g3x + g2y * g3y + g2z * g3z)
+            s2 = dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz
+            c = 1.0 + g2x * g3x + g2y * g3y + g2z * g3z
+            psi = angle_times_root(s2, c, 1.0)
             if dy * hy + dz * hz > 0.0:
                 psi = -psi
             p5 = psi
@@ -425,7 +451,9 @@ def unweighted_slab(fpf, shape, i, h, cross2, acc0, acc1):
             cx = g2y * g8z - g2z * g8y
             cy = g2z * g8x - g2x * g8z
             cz = g2x * g8y - g2y * g8x
-            psi = math.atan2(math.sqrt(dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz), 1.0 + g2x * g8x + g2y * g8y + g2z * g8z)
+            s2 = dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz
+            c = 1.0 + g2x * g8x + g2y * g8y + g2z * g8z
+            psi = angle_times_root(s2, c, 1.0)
             if -dz * hz > 0.0:
                 psi = -psi
             p6 = psi if k > 0 else 0.0
@@ -434,7 +462,9 @@ def unweighted_slab(fpf, shape, i, h, cross2, acc0, acc1):
             cx = g3y * g5z - g3z * g5y
             cy = g3z * g5x - g3x * g5z
             cz = g3x * g5y - g3y * g5x
-            psi = math.atan2(math.sqrt(dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz), 1.0 + g3x * g5x + g3y * g5y + g3z * g5z)
+            s2 = dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz
+            c = 1.0 + g3x * g5x + g3y * g5y + g3z * g5z
+            psi = angle_times_root(s2, c, 1.0)
             if dz * hz > 0.0:
                 psi = -psi
             p7 = psi
@@ -443,7 +473,9 @@ def unweighted_slab(fpf, shape, i, h, cross2, acc0, acc1):
             cx = g3y * g9z - g3z * g9y
             cy = g3z * g9x - g3x * g9z
             cz = g3x * g9y - g3y * g9x
-            psi = math.atan2(math.sqrt(dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz), 1.0 + g3x * g9x + g3y * g9y + g3z * g9z)
+            s2 = dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz
+            c = 1.0 + g3x * g9x + g3y * g9y + g3z * g9z
+            psi = angle_times_root(s2, c, 1.0)
             if -dx * hx > 0.0:
                 psi = -psi
             p8 = psi if i > 0 else 0.0
@@ -452,7 +484,9 @@ def unweighted_slab(fpf, shape, i, h, cross2, acc0, acc1):
             cx = g4y * g5z - g4z * g5y
             cy = g4z * g5x - g4x * g5z
             cz = g4x * g5y - g4y * g5x
-            psi = math.atan2(math.sqrt(dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz), 1.0 + g4x * g5x + g4y * g5y + g4z * g5z)
+            s2 = dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz
+            c = 1.0 + g4x * g5x + g4y * g5y + g4z * g5z
+            psi = angle_times_root(s2, c, 1.0)
             if dy * hy + dz * hz > 0.0:
                 psi = -psi
             p9 = psi
@@ -461,7 +495,9 @@ def unweighted_slab(fpf, shape, i, h, cross2, acc0, acc1):
             cx = g4y * g10z - g4z * g10y
             cy = g4z * g10x - g4x * g10z
             cz = g4x * g10y - g4y * g10x
-            psi = math.atan2(math.sqrt(dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz), 1.0 + g4x * g10x + g4y * g10y + g4z * g10z)
+            s2 = dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz
+            c = 1.0 + g4x * g10x + g4y * g10y + g4z * g10z
+            psi = angle_times_root(s2, c, 1.0)
             if -dy * hy > 0.0:
                 psi = -psi
             p10 = psi if j > 0 else 0.0
@@ -470,7 +506,9 @@ def unweighted_slab(fpf, shape, i, h, cross2, acc0, acc1):
             cx = g5y * g11z - g5z * g11y
             cy = g5z * g11x - g5x * g11z
             cz = g5x * g11y - g5y * g11x
-            psi = math.atan2(math.sqrt(dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz), 1.0 + g5x * g11x + g5y * g11y + g5z * g11z)
+            s2 = dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz
+            c = 1.0 + g5x * g11x + g5y * g11y + g5z * g11z
+            psi = angle_times_root(s2, c, 1.0)
             if -dx * hx > 0.0:
                 psi = -psi
             p11 = psi if i > 0 else 0.0

@@ -33,6 +33,8 @@ are kept in registers and added to the accumulators once per cube.
 import math
 
 import numba
+
+from ._atan import angle_times_root
 '''
 
 
@@ -70,6 +72,47 @@ def _scaled(terms):
     return text[2:] if text.startswith("+ ") else "-" + text[2:] if text.startswith("- ") else text
 
 
+def _face(fi, weighted, pad):
+    """The lines of face fi: its signed angle psi (times its area when weighted) into
+    p{fi}."""
+    ta, tb = _FACE_TETS[fi]
+    q0, q1, q2 = (int(q) for q in _FACE_IDX[fi])
+    d1 = _OFFSETS[q1] - _OFFSETS[q0]
+    d2 = _OFFSETS[q2] - _OFFSETS[q0]
+    ds = _OFFSETS[_FACE_FAR[fi]] - _OFFSETS[q0]
+    ga = [f"g{ta}{a}" for a in XYZ]
+    gb = [f"g{tb}{a}" for a in XYZ]
+    side = _scaled([(f"d{XYZ[a]}", int(ds[a]), a) for a in range(3)])
+    lines = [
+        f"{pad}# face {fi}: corners {[q0, q1, q2]}, tetrahedra {ta} and {tb}",
+        f"{pad}dx, dy, dz = {gb[0]} - {ga[0]}, {gb[1]} - {ga[1]}, {gb[2]} - {ga[2]}",
+        f"{pad}cx = {ga[1]} * {gb[2]} - {ga[2]} * {gb[1]}",
+        f"{pad}cy = {ga[2]} * {gb[0]} - {ga[0]} * {gb[2]}",
+        f"{pad}cz = {ga[0]} * {gb[1]} - {ga[1]} * {gb[0]}",
+        # psi = atan2(|N_a ^ N_b|, N_a . N_b), the normals N = (-g, 1)
+        f"{pad}s2 = dx * dx + dy * dy + dz * dz + cx * cx + cy * cy + cz * cz",
+        f"{pad}c = 1.0 + {ga[0]} * {gb[0]} + {ga[1]} * {gb[1]} + {ga[2]} * {gb[2]}",
+    ]
+    if weighted:
+        # m = du v_b - dv u_b with u_b = d1 h, v_b = d2 h (|u ^ v|^2 = |u_b x v_b|^2 + |m|^2)
+        lines += [f"{pad}du = f{q1} - f{q0}", f"{pad}dv = f{q2} - f{q0}"]
+        for a in range(3):
+            m = _scaled([("du", int(d2[a]), a)]) if d2[a] else None
+            n = _scaled([("dv", int(d1[a]), a)]) if d1[a] else None
+            expr = (f"{m} - ({n})" if m and n else m if m else f"-({n})" if n else "0.0")
+            lines.append(f"{pad}m{XYZ[a]} = {expr}")
+        lines.append(f"{pad}psi = 0.5 * angle_times_root(s2, c, c2_{fi} + mx * mx + my * my"
+                     " + mz * mz)")
+    else:
+        lines.append(f"{pad}psi = angle_times_root(s2, c, 1.0)")
+    lines += [f"{pad}if {side} > 0.0:", f"{pad}    psi = -psi"]
+    if tb >= 6:  # the neighbour cube below along this axis must exist
+        lines.append(f"{pad}p{fi} = psi if {'ijk'[_AXES[tb, 0]]} > 0 else 0.0")
+    else:
+        lines.append(f"{pad}p{fi} = psi")
+    return lines
+
+
 def _extrinsic(weighted):
     name = "weighted_slab" if weighted else "unweighted_slab"
     what = "sum psi |tau|" if weighted else "sum psi"
@@ -88,38 +131,7 @@ def _extrinsic(weighted):
     pad = " " * 12
     corners = {c: [] for c in range(8)}
     for fi in range(12):
-        ta, tb = _FACE_TETS[fi]
-        q0, q1, q2 = (int(q) for q in _FACE_IDX[fi])
-        d1 = _OFFSETS[q1] - _OFFSETS[q0]
-        d2 = _OFFSETS[q2] - _OFFSETS[q0]
-        ds = _OFFSETS[_FACE_FAR[fi]] - _OFFSETS[q0]
-        ga = [f"g{ta}{a}" for a in XYZ]
-        gb = [f"g{tb}{a}" for a in XYZ]
-        side = _scaled([(f"d{XYZ[a]}", int(ds[a]), a) for a in range(3)])
-        lines += [
-            f"{pad}# face {fi}: corners {[q0, q1, q2]}, tetrahedra {ta} and {tb}",
-            f"{pad}dx, dy, dz = {gb[0]} - {ga[0]}, {gb[1]} - {ga[1]}, {gb[2]} - {ga[2]}",
-            f"{pad}cx = {ga[1]} * {gb[2]} - {ga[2]} * {gb[1]}",
-            f"{pad}cy = {ga[2]} * {gb[0]} - {ga[0]} * {gb[2]}",
-            f"{pad}cz = {ga[0]} * {gb[1]} - {ga[1]} * {gb[0]}",
-            f"{pad}psi = math.atan2(math.sqrt(dx * dx + dy * dy + dz * dz + cx * cx + cy * cy"
-            f" + cz * cz), 1.0 + {ga[0]} * {gb[0]} + {ga[1]} * {gb[1]} + {ga[2]} * {gb[2]})",
-            f"{pad}if {side} > 0.0:",
-            f"{pad}    psi = -psi",
-        ]
-        if weighted:
-            # m = du v_b - dv u_b with u_b = d1 h, v_b = d2 h (|u ^ v|^2 = |u_b x v_b|^2 + |m|^2)
-            lines += [f"{pad}du = f{q1} - f{q0}", f"{pad}dv = f{q2} - f{q0}"]
-            for a in range(3):
-                m = _scaled([("du", int(d2[a]), a)]) if d2[a] else None
-                n = _scaled([("dv", int(d1[a]), a)]) if d1[a] else None
-                expr = (f"{m} - ({n})" if m and n else m if m else f"-({n})" if n else "0.0")
-                lines.append(f"{pad}m{XYZ[a]} = {expr}")
-            lines.append(f"{pad}psi *= 0.5 * math.sqrt(c2_{fi} + mx * mx + my * my + mz * mz)")
-        if tb >= 6:  # the neighbour cube below along this axis must exist
-            lines.append(f"{pad}p{fi} = psi if {'ijk'[_AXES[tb, 0]]} > 0 else 0.0")
-        else:
-            lines.append(f"{pad}p{fi} = psi")
+        lines += _face(fi, weighted, pad)
         for q in _FACE_IDX[fi]:
             corners[int(q)].append(f"p{fi}")
     for t in range(6):
