@@ -1,16 +1,18 @@
 """The stencil kernels' angles: ``atan2(sqrt(s2), c) * sqrt(a2)``, compiled inline.
 
-Each face of the weighted operator's stencil contributes its dihedral angle psi =
-atan2(|N_a ^ N_b|, N_a . N_b) times its area (DESIGN.md section 5), 12 faces per
-voxel. Written as ``math.atan2(math.sqrt(s2), c) * math.sqrt(a2)``, the kernel spent
-half its time there: glibc's `atan2` is correctly rounded, with slow paths, and two
-square roots share the divider with it. `angle_times_root` does the same in one square
-root and, for the faces of a smooth graph (an angle below 33 degrees), no branch:
-atan(r) = r (1 + z P(z) / Q(z)), z = r^2 = s2 / c^2, times sqrt(a2) is
-sqrt(s2 a2) / c (1 + z P / Q). P / Q is Cephes' double `atan` (S. L. Moshier, the
-Cephes Math Library: a 4/5 rational on [0, 0.66], the pi/4 shift above it); a larger
-angle takes `atan2_upper`, Cephes reduced to the first octant. Both are within 2 ulp of
-numpy's `arctan2` (tested) and exact at 0 (a flat face's angle is 0).
+Each face of the weighted operator's stencil contributes its bending angle |psi| =
+atan2(|N_a ^ N_b|, N_a . N_b) times its area (DESIGN.md section 3; the kernel gives it
+its sign by the side the far vertex lies on), 12 faces per voxel. Written as
+``math.atan2(math.sqrt(s2), c) * math.sqrt(a2)``, the kernel spent half its time
+there: glibc's `atan2` is correctly rounded, with slow paths, and two square roots
+share the divider with it. `angle_times_root` does the same in one square root and,
+for the faces of a smooth graph (an angle below 33 degrees), no reduction: atan(r) =
+r (1 + z P(z) / Q(z)), z = r^2 = s2 / c^2, times sqrt(a2) is sqrt(s2 a2) / c
+(1 + z P / Q). P / Q is Cephes' double `atan` (S. L. Moshier, the Cephes Math Library:
+a 4/5 rational on [0, 0.66], the pi/4 shift above it), accurate near 0 where an
+`arccos` form is not; a larger angle takes `atan2_upper`, Cephes reduced to the first
+octant. Both are within 2 ulp of numpy's `arctan2` (tested) and exact at 0 (a flat
+face's angle is 0).
 """
 
 import math
