@@ -206,3 +206,34 @@ def test_a_staging_refilled_by_a_late_worker_is_removed_on_release(tmp_path):
     assert any(p.name.startswith(".volseg-staging-") for p in tmp_path.iterdir())
     out.release()                                    # ... then the set lets go
     assert list(tmp_path.iterdir()) == []
+
+
+def test_an_interrupt_between_making_the_staging_and_owning_it_leaves_nothing(tmp_path,
+                                                                             monkeypatch):
+    # SIGTERM lands just after `mkdtemp` made the folder, before `commit` holds it
+    # (CI saw this window once, the signal sent as the lock file appeared).
+    import tempfile
+
+    from volseg.io import output_set
+
+    made = tempfile.mkdtemp
+
+    def interrupted(*args, **kwargs):
+        made(*args, **kwargs)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(output_set.tempfile, "mkdtemp", interrupted)
+    with pytest.raises(KeyboardInterrupt), OutputSet(tmp_path, "fuel", NAMES) as out:
+        out.commit(lambda paths: None)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_release_leaves_a_journalled_staging_for_recovery(tmp_path):
+    out = OutputSet(tmp_path, "fuel", NAMES)
+    out.acquire()
+    staging = _staging(tmp_path, journal=sorted(NAMES.values()))
+    out.release()
+    assert staging.is_dir()                       # a commit to finish, not to discard
+    with OutputSet(tmp_path, "fuel", NAMES, force=True) as again:
+        assert again.recovered
+    assert (tmp_path / "fuel_summary.json").read_text() == "new"

@@ -255,7 +255,6 @@ class OutputSet:
         #: Paths in the folder removed with the commit (the blockwise run's work
         #: folder): in the journal, so a commit finished by `recover` removes them too.
         self.discard: list[Path] = []
-        self._abandoned: list[Path] = []
         self._lock = FolderLock(self.folder, stem, wait=wait,
                                 busy=f"another volseg process is writing {stem}_* there")
 
@@ -279,12 +278,15 @@ class OutputSet:
             raise
 
     def release(self):
-        """Release the lock; first remove again the staging of a commit that failed or
-        was interrupted (a worker thread still writing a block can recreate files in it
-        after the commit removed it; by now the engine has stopped its threads)."""
-        for staging in self._abandoned:
-            shutil.rmtree(staging, ignore_errors=True)
-        self._abandoned.clear()
+        """Release the lock; first remove again every staging of this stem without a
+        journal. Under the lock they are this process's: a commit that failed or was
+        interrupted (a worker thread still writing a block can recreate files in it
+        after the commit removed it; by now the engine has stopped its threads), or
+        one interrupted between creating its folder and owning it."""
+        if self._lock.held:
+            for staging in _stagings(self.folder, self.stem):
+                if _real_dir(staging) and not os.path.lexists(staging / _JOURNAL):
+                    shutil.rmtree(staging, ignore_errors=True)
         self._lock.release()
 
     def check(self):
@@ -332,9 +334,6 @@ class OutputSet:
             self._swap(staging)
             for path in self.discard:
                 _remove(path)
-        except BaseException:
-            self._abandoned.append(staging)
-            raise
         finally:
             shutil.rmtree(staging, ignore_errors=True)
         return dict(self.targets)
