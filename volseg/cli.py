@@ -108,6 +108,9 @@ def _add_blockwise_options(seg):
                         "(tcp://host:port)")
     engine.add_argument("--workers", type=int, metavar="N",
                         help="threads or local workers (default: one per core)")
+    engine.add_argument("--threads-per-worker", type=int, metavar="N", default=1,
+                        help="with --scheduler local: threads in each worker process "
+                        "(default 1); threads of one worker share blocks without a transfer")
     engine.add_argument("--memory-limit", metavar="BYTES",
                         help="memory budget, e.g. 12GB or 0.5 (a share of RAM; default "
                         f"{MEMORY_SHARE:g} of this machine's RAM): an input whose in-memory run "
@@ -279,6 +282,7 @@ def _cmd_segment(args):
     _check_cut_options(args)
     engine = Engine(args.scheduler, workers=args.workers, memory_limit=args.memory_limit,
                     hierarchy_memory=args.hierarchy_memory,
+                    threads_per_worker=args.threads_per_worker,
                     progress=not args.quiet and sys.stderr.isatty())   # arguments checked here
     engine.check()
     # Read and check every input before writing or computing anything.

@@ -49,6 +49,9 @@ def test_bad_engine_arguments_and_an_unreachable_scheduler(tmp_path, volume, cap
     for extra, message in ((["--workers", "0"], "--workers must be at least 1"),
                            (["--memory-limit", "lots"], "--memory-limit 'lots'"),
                            (["--hierarchy-memory", "2GB"], "--hierarchy-memory adds a worker"),
+                           (["--threads-per-worker", "2"], "--threads-per-worker sets the local"),
+                           (["--scheduler", "local", "--threads-per-worker", "0"],
+                            "--threads-per-worker must be at least 1"),
                            (["--scheduler", "local", "--hierarchy-memory", "10MB"],
                             "--hierarchy-memory 10 MiB is less than"),
                            (["--scheduler", "tcp://127.0.0.1:9"],
@@ -339,3 +342,49 @@ def test_a_cut_on_a_cluster_joins_no_hierarchy(measure, monkeypatch):
     assert np.array_equal(labels, expected) and report.n_regions == expected_report.n_regions
     assert np.array_equal(report.top_maxima, expected_report.top_maxima)
     assert report.curve.n_components < report.n_components     # some were dropped
+
+
+@pytest.mark.slow
+def test_a_local_worker_of_two_threads_gives_the_labels_of_the_threads(tmp_path, volume):
+    """``--threads-per-worker 2``: one worker process whose two threads run the blocks
+    (each kernel on one numba thread); the same output as Dask's threads."""
+    np.save(tmp_path / "vol.npy", volume)
+    argv = ["segment", str(tmp_path / "vol.npy"), "--chunks", "8", "--mask", "none", "-q"]
+    assert main([*argv, "-o", str(tmp_path / "threads"), "--scheduler", "threads"]) == 0
+    assert main([*argv, "-o", str(tmp_path / "local"), "--scheduler", "local", "--workers", "1",
+                 "--threads-per-worker", "2", "--memory-limit", "1GiB"]) == 0
+    labels = [read_volume(tmp_path / run / "vol_labels.nii.gz").data
+              for run in ("threads", "local")]
+    assert labels[0].max() > 1 and np.array_equal(labels[0], labels[1])
+    with engine_module.Engine("local", workers=1, threads_per_worker=2,
+                              memory_limit="1GiB") as engine:
+        (info,) = engine.client.scheduler_info()["workers"].values()
+        assert info["nthreads"] == 2 and "1 workers of 2 threads" in engine.describe()
+
+
+@pytest.mark.slow
+def test_a_script_importing_volseg_gets_one_numba_thread_per_local_worker(tmp_path):
+    """A script that imports volseg at its top imports numba in the spawned workers
+    before their environment is set; numba must still take NUMBA_NUM_THREADS=1 (else
+    it oversubscribes the cores, and a later compilation fails)."""
+    import subprocess
+    import sys
+    import textwrap
+
+    script = tmp_path / "user_script.py"
+    script.write_text(textwrap.dedent("""
+        import volseg.cli  # noqa: F401  (numba imported in every spawned worker)
+        from volseg.blockwise.engine import Engine
+
+        def threads():
+            from numba.core import config
+            return config.NUMBA_NUM_THREADS
+
+        if __name__ == "__main__":
+            with Engine("local", workers=1, memory_limit="1GiB") as engine:
+                print(list(engine.client.run(threads).values()))
+    """))
+    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
+                          timeout=120, cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "[1]", done.stdout

@@ -14,10 +14,13 @@ Dask's threaded scheduler in this process.
   Each worker thread runs numba's parallel loops on one thread, so `workers` is the
   number of cores used. Memory is bounded by Dask's ordering of the blocks, not
   enforced.
-- ``scheduler="local"``: a `LocalCluster` of `workers` processes, one thread each,
-  whose memory limits sum to `memory_limit` (default `default_memory_limit()`, half
-  of this machine's RAM); Dask's worker memory manager then spills, pauses and
-  restarts workers against that limit.
+- ``scheduler="local"``: a `LocalCluster` of `workers` processes, `threads_per_worker`
+  threads each (default one), whose memory limits sum to `memory_limit` (default
+  `default_memory_limit()`, half of this machine's RAM); Dask's worker memory manager
+  then spills, pauses and restarts workers against that limit. Threads of one worker
+  share its blocks without a transfer: a multi-node cluster is usually run as one
+  worker of several threads per node, and on one machine one worker of 2 threads
+  moves no block between processes (`docs/cluster.md` has the figures).
 - ``scheduler="tcp://host:port"``: connect to a running scheduler (`EngineError`,
   a `ValueError`, when it cannot be reached within `timeout` seconds). Its workers
   must see the same file system as this process (inputs, outputs and the run's work
@@ -143,9 +146,18 @@ class Engine:
 
     def __init__(self, scheduler: str | None = None, *, workers: int | None = None,
                  memory_limit=None, hierarchy_memory=None, progress: bool = False,
-                 timeout: float | None = None):
+                 timeout: float | None = None, threads_per_worker: int = 1):
         if workers is not None and workers < 1:
             raise EngineError(f"--workers must be at least 1, got {workers}")
+        if threads_per_worker < 1:
+            raise EngineError(f"--threads-per-worker must be at least 1, got "
+                              f"{threads_per_worker}")
+        if threads_per_worker != 1 and scheduler != "local":
+            raise EngineError("--threads-per-worker sets the local cluster's workers "
+                              "(--scheduler local); with threads, --workers is the threads; "
+                              "a running cluster's workers have their own (dask worker "
+                              "--nthreads)")
+        self.threads_per_worker = threads_per_worker
         self.scheduler = scheduler
         self.workers = workers or os.cpu_count() or 1
         self.memory_limit = (default_memory_limit() if memory_limit is None
@@ -180,7 +192,9 @@ class Engine:
         if self.scheduler == "local":
             extra = ("" if self.hierarchy_memory is None else
                      f", and one of {self.hierarchy_memory / 2**30:.1f} GiB for the hierarchy")
-            return (f"local Dask cluster ({self.workers} workers, "
+            threads = ("" if self.threads_per_worker == 1
+                       else f" of {self.threads_per_worker} threads")
+            return (f"local Dask cluster ({self.workers} workers{threads}, "
                     f"{self.memory_limit / self.workers / 2**30:.1f} GiB each{extra})")
         return f"Dask scheduler {self.scheduler}" + (
             " (and a worker for the hierarchy)" if self._hierarchy_worker else "")
@@ -256,9 +270,9 @@ class Engine:
                 dask.config.set(scheduler=previous)
                 raise EngineError(f"cannot reach the Dask scheduler at {self.scheduler} "
                                   f"({type(err).__name__}: {err})") from None
-        # One thread per worker, and one for numba's parallel loops inside it: the
-        # workers are the parallelism (nested, they oversubscribe the cores and the
-        # kernels' OpenMP threads spin against each other: 2.3x slower on 2 cores).
+        # One numba thread per worker thread: the worker threads are the parallelism
+        # (nested, they oversubscribe the cores and the kernels' OpenMP threads spin
+        # against each other: 2.3x slower on 2 cores).
         if self.memory_limit // self.workers < MIN_WORKER_MEMORY:
             raise EngineError(
                 f"--memory-limit {self.memory_limit / 2**20:.0f} MiB over {self.workers} workers "
@@ -266,7 +280,8 @@ class Engine:
                 "make progress (its process alone); give more, or fewer --workers")
         # The workers' and nanny's log lines (pausing, restarting) are not volseg's
         # either: what stops the run, `compute` says in its own line.
-        cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
+        cluster = LocalCluster(n_workers=self.workers,
+                               threads_per_worker=self.threads_per_worker, processes=True,
                                memory_limit=self.memory_limit // self.workers,
                                dashboard_address=None, env={"NUMBA_NUM_THREADS": "1"},
                                silence_logs=logging.CRITICAL)
@@ -278,7 +293,11 @@ class Engine:
                                         "resources": {HIERARCHY_RESOURCE: 1}}}
             cluster.worker_spec["hierarchy"] = spec
             cluster.scale(len(cluster.worker_spec))
-        return Client(cluster)
+        from ._numba_threads import NumbaThreadsFromEnvironment
+
+        client = Client(cluster)
+        client.register_plugin(NumbaThreadsFromEnvironment(), name="volseg-numba-threads")
+        return client
 
     def compute(self, *collections, stage: str = "computing"):
         """`dask.compute(*collections)`, with a progress bar named `stage`."""
