@@ -5,6 +5,7 @@
                                          [--skip-in-memory-above 512] [--folder /tmp/bw]
                                          [--smooth SIGMA] [--repeat R] [--base REV]
                                          [--memory-limit BYTES] [--hierarchy-memory BYTES]
+                                         [--threads-per-worker N] [--blocks EDGE]
                                          [--measure persistence]
 
 For each size N it writes a synthetic smooth uint8 field of N^3 voxels straight to a
@@ -165,6 +166,12 @@ def main(argv=None) -> int:
     parser.add_argument("--memory-limit",
                         help="volseg segment --memory-limit for the blockwise runs (with "
                              "local: shared by its workers)")
+    parser.add_argument("--blocks", type=int,
+                        help="volseg segment --chunks: the blockwise runs' block edge "
+                             "(default: the store's chunks, --chunks)")
+    parser.add_argument("--threads-per-worker", type=int, default=1,
+                        help="volseg segment --threads-per-worker for the local blockwise "
+                             "runs (default 1)")
     parser.add_argument("--hierarchy-memory",
                         help="volseg segment --hierarchy-memory for the local blockwise runs "
                              "(one more worker, the one that holds the whole hierarchy)")
@@ -192,10 +199,17 @@ def _main(args, trees) -> int:
         tag = f"_s{args.smooth:g}" if args.smooth else ""
         plain = [("in memory", "-", folder / f"mem{n}{tag}",
                   [str(npy_path), "--mask", "none"])] if in_memory else []
-        plain += [(f"blockwise {args.chunks}^3 {scheduler}", workers,
-                   folder / f"blk{n}_{scheduler}_{workers}{tag}",
+        threads = args.threads_per_worker
+        each = {s: ("" if s != "local" or threads == 1 else f"x{threads}")
+                for s in args.schedulers}
+        blocks = args.blocks or args.chunks
+        size = "" if blocks == args.chunks else f"_b{blocks}"
+        plain += [(f"blockwise {blocks}^3 {scheduler}{each[scheduler]}", workers,
+                   folder / f"blk{n}_{scheduler}_{workers}{each[scheduler]}{size}{tag}",
                    [str(zarr_path), "--scheduler", scheduler, "--workers", str(workers),
+                    *(["--chunks", str(blocks)] if size else []),
                     *(["--memory-limit", args.memory_limit] if args.memory_limit else []),
+                    *(["--threads-per-worker", str(threads)] if each[scheduler] else []),
                     *(["--hierarchy-memory", args.hierarchy_memory]
                       if args.hierarchy_memory and scheduler == "local" else [])])
                   for scheduler in args.schedulers for workers in args.workers]
