@@ -237,3 +237,15 @@ def test_release_leaves_a_journalled_staging_for_recovery(tmp_path):
     with OutputSet(tmp_path, "fuel", NAMES, force=True) as again:
         assert again.recovered
     assert (tmp_path / "fuel_summary.json").read_text() == "new"
+
+
+def test_release_after_the_folder_was_removed_raises_nothing(tmp_path):
+    import shutil
+
+    folder = tmp_path / "out"
+    folder.mkdir()
+    out = OutputSet(folder, "fuel", NAMES)
+    out.acquire()
+    shutil.rmtree(folder)                       # a user cleaning up during the run
+    out.release()
+    assert not out._lock.held

@@ -283,11 +283,14 @@ class OutputSet:
         interrupted (a worker thread still writing a block can recreate files in it
         after the commit removed it; by now the engine has stopped its threads), or
         one interrupted between creating its folder and owning it."""
-        if self._lock.held:
-            for staging in _stagings(self.folder, self.stem):
+        try:
+            for staging in _stagings(self.folder, self.stem) if self._lock.held else ():
                 if _real_dir(staging) and not os.path.lexists(staging / _JOURNAL):
                     shutil.rmtree(staging, ignore_errors=True)
-        self._lock.release()
+        except OSError:     # the folder gone or unreadable: nothing of ours to remove
+            pass
+        finally:
+            self._lock.release()
 
     def check(self):
         """Refuse targets that exist (without `force`) or are not regular files (a
