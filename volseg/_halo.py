@@ -22,7 +22,7 @@ import itertools
 
 import numpy as np
 
-__all__ = ["with_halo", "block_starts"]
+__all__ = ["with_halo", "with_halos", "block_starts"]
 
 
 def block_starts(chunks) -> list:
@@ -62,6 +62,26 @@ def _assemble(block, shells, offsets, value):
     return out
 
 
+def _halo_tasks(x, value, fresh: bool):
+    """(the shells' graph, the collections it reads, {block index: the arguments of
+    `_assemble` for that block}) of `x`'s halo."""
+    from dask.base import tokenize
+    from dask.graph_manipulation import clone
+
+    shells = f"halo-shell-{tokenize(x, value, fresh)}"
+    own = clone(x) if fresh else x
+    grid = list(itertools.product(*(range(n) for n in x.numblocks)))
+    offsets = [o for o in itertools.product((-1, 0, 1), repeat=x.ndim) if any(o)]
+    graph = {(shells, *index): (_shell, (x.name, *index)) for index in grid}
+    arguments = {}
+    for index in grid:
+        around = [tuple(i + o for i, o in zip(index, offset, strict=True)) for offset in offsets]
+        keys = [(shells, *n) if all(0 <= i < b for i, b in zip(n, x.numblocks, strict=True))
+                else None for n in around]
+        arguments[index] = [(own.name, *index), keys, offsets, value]
+    return graph, [x, own], arguments
+
+
 def with_halo(x, value, fresh: bool = False):
     """`x` (a Dask array) with every block grown by one voxel on each side: its
     neighbours' voxels, and `value` outside the array (as `overlap(x, depth=1,
@@ -69,22 +89,48 @@ def with_halo(x, value, fresh: bool = False):
     the module docstring)."""
     import dask.array as da
     from dask.base import tokenize
-    from dask.graph_manipulation import clone
     from dask.highlevelgraph import HighLevelGraph
 
-    token = tokenize(x, value, fresh)
-    shells = f"halo-shell-{token}"
-    name = f"halo-{token}"
-    own = clone(x) if fresh else x
-    grid = list(itertools.product(*(range(n) for n in x.numblocks)))
-    offsets = [o for o in itertools.product((-1, 0, 1), repeat=x.ndim) if any(o)]
-    graph = {(shells, *index): (_shell, (x.name, *index)) for index in grid}
-    for index in grid:
-        around = [tuple(i + o for i, o in zip(index, offset, strict=True)) for offset in offsets]
-        keys = [(shells, *n) if all(0 <= i < b for i, b in zip(n, x.numblocks, strict=True))
-                else None for n in around]
-        graph[(name, *index)] = (_assemble, (own.name, *index), keys, offsets, value)
-    layers = HighLevelGraph.from_collections(name, graph, dependencies=[x, own])
+    name = f"halo-{tokenize(x, value, fresh)}"
+    graph, dependencies, arguments = _halo_tasks(x, value, fresh)
+    for index, args in arguments.items():
+        graph[(name, *index)] = (_assemble, *args)
+    layers = HighLevelGraph.from_collections(name, graph, dependencies=dependencies)
     grown = tuple(tuple(s + 2 for s in c) for c in x.chunks)
     return da.Array(layers, name, chunks=grown, dtype=x.dtype,
                     meta=np.empty((0,) * x.ndim, dtype=x.dtype))
+
+
+def _assembled_together(*arguments):
+    """The halos of one block of several arrays, as one object (a 1x..x1 object
+    block holding their tuple)."""
+    halos = tuple(_assemble(*args) for args in arguments)
+    out = np.empty((1,) * halos[0].ndim, dtype=object)
+    out[(0,) * halos[0].ndim] = halos
+    return out
+
+
+def with_halos(arrays, values, fresh):
+    """The halos (`with_halo`, `fresh` per array) of several arrays of the same block
+    grid, each block's
+    assembled in one task: an object array of the block grid (chunks of one), each
+    block holding the tuple of that block's halos. A task that reads two halos of one
+    block then waits for one task, not for two that the scheduler may run far apart
+    (on a cluster, each halo held, then moved, until its partner is made)."""
+    import dask.array as da
+    from dask.base import tokenize
+    from dask.highlevelgraph import HighLevelGraph
+
+    name = f"halos-{tokenize(*arrays, *values, *fresh)}"
+    graph, dependencies, arguments = {}, [], []
+    for x, value, new in zip(arrays, values, fresh, strict=True):
+        shells, reads, args = _halo_tasks(x, value, new)
+        graph.update(shells)
+        dependencies += reads
+        arguments.append(args)
+    for index in arguments[0]:
+        graph[(name, *index)] = (_assembled_together, *(args[index] for args in arguments))
+    layers = HighLevelGraph.from_collections(name, graph, dependencies=dependencies)
+    ndim = arrays[0].ndim
+    return da.Array(layers, name, chunks=tuple((1,) * n for n in arrays[0].numblocks),
+                    dtype=object, meta=np.empty((0,) * ndim, dtype=object))

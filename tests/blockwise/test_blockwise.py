@@ -224,6 +224,28 @@ def test_halo_equals_dask_overlap(chunks):
             assert np.array_equal(ours.compute(scheduler="sync"), theirs.compute(scheduler="sync"))
 
 
+@pytest.mark.parametrize("chunks", [((7, 7, 9), (17,), (2, 2, 2, 3)), ((1, 22), (5, 5, 7), (9,))])
+def test_halos_of_one_block_made_together_equal_dask_overlap(chunks):
+    """`_halo.with_halos`: each block's halos of two arrays, in one task, are dask's
+    overlap of each, kept or recomputed, in 3-D and 2-D."""
+    from volseg._halo import with_halos
+
+    values = np.random.default_rng(0).random((23, 17, 9))
+    # (the 2-D array made on its own: a recomputed copy of ``x[:, :, 4] * 100`` beside
+    # ``x[:, :, 4]`` in one graph is refused by dask 2026.8's fusion, halos or not)
+    for array in (da.from_array(values, chunks=chunks),
+                  da.from_array(values[:, :, 4], chunks=chunks[:2])):
+        cells = (array * 100).astype(np.int32)
+        both = with_halos([array, cells], [-np.inf, -1], [False, True]).compute(scheduler="sync")
+        theirs = [da.overlap.overlap(a, depth=1, boundary=v)
+                  for a, v in ((array, -np.inf), (cells, -1))]
+        assert both.shape == array.numblocks
+        for index in np.ndindex(*array.numblocks):
+            for ours, overlap in zip(both[index], theirs, strict=True):
+                assert ours.dtype == overlap.dtype
+                assert np.array_equal(ours, overlap.blocks[index].compute(scheduler="sync"))
+
+
 @pytest.mark.parametrize("dtype", [np.uint8, np.int16, np.float32, np.float64])
 def test_mask_rules_of_a_dask_volume_equal_in_memory(dtype):
     from volseg.masks import foreground_mask

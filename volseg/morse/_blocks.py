@@ -46,7 +46,7 @@ import numpy as np
 from .. import _atomic
 from .._block_hooks import BlockHooks
 from .._distinct import index_type, places
-from .._halo import block_starts, with_halo
+from .._halo import block_starts, with_halo, with_halos
 from .._task_graph import TaskGraph, _one_object
 from . import _block_kernels as kernels
 from . import _buckets, _exits, _group_tree, _measures, _ranks
@@ -269,9 +269,11 @@ def dask_hierarchy(field, connectivity="kuhn", mask=None, hooks=None) -> Hierarc
         phases.done("blocks: cells (stored)")
         if grid.scratch is not None:    # every cell is stored: the ends are not read again
             shutil.rmtree(grid.scratch, ignore_errors=True)
-    halo_cells = with_halo(cells, -1, fresh=hooks.store is not None)
-    forests = per_block(hooks.wrap("forests", lambda h, c, block_id: _pairs_of_block(
-        h, c, grid.origin(block_id), grid.shape, grid.offsets)), halo, halo_cells)
+    # Both halos of a block in one task: made apart, one waited (and spilled, on a
+    # cluster) for the other.
+    halos = with_halos([values, cells], [-np.inf, -1], [hooks.reread, hooks.store is not None])
+    forests = per_block(hooks.wrap("forests", lambda both, block_id: _pairs_of_block(
+        *only(both), grid.origin(block_id), grid.shape, grid.offsets)), halos)
     shape = tuple(int(s) for s in grid.shape)
     # Two steps, as the blocks' work then the join: one graph ending in the join kept
     # every block's halo in memory at once.
