@@ -224,17 +224,36 @@ def test_halo_equals_dask_overlap(chunks):
             assert np.array_equal(ours.compute(scheduler="sync"), theirs.compute(scheduler="sync"))
 
 
+def test_a_fresh_copy_reads_nothing_of_the_original():
+    """`_halo.fresh_copy` of sliced, transposed, cast arrays (dask's `Task` objects,
+    whose keys `dask.graph_manipulation.clone` left as they were): the same values,
+    no key shared, every dependency inside the copy; their halos equal dask's."""
+    from dask._task_spec import GraphNode
+
+    from volseg._halo import fresh_copy, with_halo
+
+    x = da.from_array(np.random.default_rng(3).random((2, 12, 10, 9)), chunks=(1, 5, 4, 5))
+    for array in (x[1], x[0].transpose(2, 1, 0), (x[0] * 100).astype(np.int32),
+                  x[:, 2:9].sum(axis=0)):
+        copy = fresh_copy(array)
+        graph, original = dict(copy.__dask_graph__()), dict(array.__dask_graph__())
+        assert not set(graph) & set(original)
+        for value in graph.values():
+            if isinstance(value, GraphNode):
+                assert value.dependencies <= set(graph)
+        assert np.array_equal(copy.compute(scheduler="sync"), array.compute(scheduler="sync"))
+        assert np.array_equal(with_halo(array, -1, fresh=True).compute(scheduler="sync"),
+                              da.overlap.overlap(array, depth=1, boundary=-1).compute())
+
+
 @pytest.mark.parametrize("chunks", [((7, 7, 9), (17,), (2, 2, 2, 3)), ((1, 22), (5, 5, 7), (9,))])
 def test_halos_of_one_block_made_together_equal_dask_overlap(chunks):
     """`_halo.with_halos`: each block's halos of two arrays, in one task, are dask's
     overlap of each, kept or recomputed, in 3-D and 2-D."""
     from volseg._halo import with_halos
 
-    values = np.random.default_rng(0).random((23, 17, 9))
-    # (the 2-D array made on its own: a recomputed copy of ``x[:, :, 4] * 100`` beside
-    # ``x[:, :, 4]`` in one graph is refused by dask 2026.8's fusion, halos or not)
-    for array in (da.from_array(values, chunks=chunks),
-                  da.from_array(values[:, :, 4], chunks=chunks[:2])):
+    x = da.from_array(np.random.default_rng(0).random((23, 17, 9)), chunks=chunks)
+    for array in (x, x[:, :, 4]):
         cells = (array * 100).astype(np.int32)
         both = with_halos([array, cells], [-np.inf, -1], [False, True]).compute(scheduler="sync")
         theirs = [da.overlap.overlap(a, depth=1, boundary=v)
