@@ -154,10 +154,11 @@ def _ends_answered(placed: tuple, questions: list) -> list:
 
 def _leaf_pieces(bucket, placed: tuple, asked: list, replies: list, n_leaves: int) -> list:
     """What a bucket sends each leaf: (its maxima there, their measures) and the events
-    with an end there, as (young, near end, far end, far end's leaf and measure, *the
-    sweep key: saddle value, saddle, lower end, higher end). Maximum ids in the
-    buckets' id type (int32 where they fit: the pieces are most of what the pruning
-    moves)."""
+    with an end there, as (young, near end, far end, far end's leaf and measure, the
+    saddle value, the saddle): the sweep key's two ends are the near and far ends,
+    ordered in `leaf_state`. Maximum ids in the buckets' id type (int32 where they
+    fit: the pieces are most of what the pruning moves, and all of them are held at
+    once, as each leaf reads a piece of every bucket)."""
     first, leaf, sums = placed
     index = bucket.target.dtype
     ids = first + np.arange(len(bucket), dtype=index)
@@ -176,8 +177,7 @@ def _leaf_pieces(bucket, placed: tuple, asked: list, replies: list, n_leaves: in
     far_leaf = np.concatenate([lt, ls[other]]).astype(np.int32)
     far_sum = np.concatenate([known_sum[at_t], known_sum[at_s][other]])
     columns = (ids[dies][both], near, far, far_leaf, far_sum,
-               bucket.saddle_value[dies][both], bucket.saddle[dies][both].astype(np.int64),
-               np.minimum(s, t)[both], np.maximum(s, t)[both])
+               bucket.saddle_value[dies][both], bucket.saddle[dies][both].astype(np.int64))
     by_max = np.argsort(leaf, kind="stable")
     max_bounds = np.searchsorted(leaf[by_max], np.arange(n_leaves + 1))
     by_edge = np.argsort(near_leaf, kind="stable")
@@ -193,8 +193,9 @@ def _leaf_pieces(bucket, placed: tuple, asked: list, replies: list, n_leaves: in
 def leaf_state(g: int, pieces: list) -> _prune_groups.GroupState:
     """Leaf `g`'s `GroupState` from the buckets' pieces: its maxima, and its edges in
     sweep order."""
-    rid, key, young, near, far, far_leaf, far_sum, *sweep = (
+    rid, key, young, near, far, far_leaf, far_sum, value, saddle = (
         np.concatenate([p[k] for p in pieces]) for k in range(len(pieces[0])))
+    sweep = (value, saddle, np.minimum(near, far), np.maximum(near, far))
     order = np.argsort(rid, kind="stable")
     by = _saddle_order(*sweep)[::-1]          # decreasing (value, saddle, pair)
     inside = far_leaf[by] == g
