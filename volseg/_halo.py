@@ -9,7 +9,7 @@ with halo is assembled in one task from the block itself and its neighbours' she
 right before the task that reads it. The result is what `overlap(x, depth=1,
 boundary=value)` gives, value for value (tested).
 
-With ``fresh=True`` the blocks assembled are recomputed (`fresh_copy`: `x`'s graph renamed)
+With ``fresh=True`` the blocks assembled are recomputed (`fresh_copy`: a clone of `x`'s graph)
 rather than kept from the shell pass: for a store-backed array this rereads a block
 when its halo is needed, so a block is in memory only while a shell is cut from it
 or while the task that reads its halo runs; without it, a block waits in memory from
@@ -62,39 +62,30 @@ def _assemble(block, shells, offsets, value):
     return out
 
 
-def _renamed(value, names: dict):
-    """A legacy task, list, dict or key `value` with every key in `names` renamed."""
-    if type(value) is tuple and value and callable(value[0]):
-        return (value[0], *(_renamed(v, names) for v in value[1:]))
-    if type(value) is list:
-        return [_renamed(v, names) for v in value]
-    if type(value) is dict:
-        return {k: _renamed(v, names) for k, v in value.items()}
-    try:
-        return names.get(value, value)
-    except TypeError:                   # unhashable: not a key
-        return value
-
-
 def fresh_copy(x):
-    """`x` (a Dask array) computed again from its sources: every key of its graph
-    renamed. `dask.graph_manipulation.clone` leaves the keys inside dask's `Task`
-    objects (slicing, transposing) as they were, so its copy then fails to fuse
-    ("Cannot fuse tasks with multiple outputs", dask issue 12455) or reads the
-    original's tasks after all."""
+    """`x` (a Dask array) computed again from its sources: `dask.graph_manipulation.clone`
+    with every key renamed. `clone` leaves the keys inside dask's `Task` objects in
+    materialized layers (slicing, transposing) as they were, so its copy then failed
+    to fuse ("Cannot fuse tasks with multiple outputs", dask issue 12455) or read the
+    original's tasks after all: those are renamed here."""
     import dask.array as da
     from dask._task_spec import GraphNode
     from dask.base import clone_key, tokenize
-    from dask.highlevelgraph import HighLevelGraph
+    from dask.graph_manipulation import clone
+    from dask.highlevelgraph import HighLevelGraph, MaterializedLayer
 
-    graph = dict(x.__dask_graph__())
     seed = tokenize(x, "fresh")
-    names = {key: clone_key(key, seed) for key in graph}
-    copy = {names[key]: value.substitute(names, key=names[key])
-            if isinstance(value, GraphNode) else _renamed(value, names)
-            for key, value in graph.items()}
-    name = clone_key(x.name, seed)
-    return da.Array(HighLevelGraph.from_collections(name, copy, dependencies=()), name,
+    copy = clone(x, seed=seed)
+    graph = copy.__dask_graph__()
+    layers, names = dict(graph.layers), None
+    for name, layer in graph.layers.items():
+        if isinstance(layer, MaterializedLayer) and any(
+                isinstance(v, GraphNode) for v in layer.values()):
+            names = names or {k: clone_key(k, seed) for k in x.__dask_graph__()}
+            layers[name] = MaterializedLayer({
+                k: v.substitute(names, key=k) if isinstance(v, GraphNode) else v
+                for k, v in layer.items()})
+    return da.Array(HighLevelGraph(layers, graph.dependencies), copy.name,
                     chunks=x.chunks, dtype=x.dtype, meta=x._meta)
 
 
