@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._distinct import distinct
+from .._sizes import SizedByArrays
 from .._task_graph import TaskGraph
 from . import _ranks
 from ._buckets import Bucket, batches, by_bucket, first_ids
@@ -41,7 +42,7 @@ MAX_ROUNDS = 64
 
 
 @dataclass(frozen=True)
-class Head:
+class Head(SizedByArrays):
     """The events a cut reads, last merged first: the first `values` (extinctions),
     `keys` (the order's exact key: the extinction, in fixed point for a size measure)
     and `ties` of `n_events`, by decreasing key, ties the lower `ties` first (the young
@@ -134,7 +135,7 @@ def merged(merges, at, rule) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class Pointers:
+class Pointers(SizedByArrays):
     """A bucket's maxima during the pointer jumping: `pointer` a maximum id on the way
     to the region, or the region index where `known` (-1: a dropped component);
     `root`: the regions' highest maxima."""

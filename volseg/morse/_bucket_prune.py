@@ -38,6 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._distinct import distinct
+from .._sizes import SizedByArrays
 from .._task_graph import TaskGraph
 from . import _measures, _merge_groups, _prune_groups
 from ._block_objects import per_block
@@ -50,7 +51,7 @@ __all__ = []
 
 
 @dataclass
-class Merges:
+class Merges(SizedByArrays):
     """How a size measure's pruning merges the maxima ``first`` to ``first + len - 1``
     (module docstring, step 4): `target` the smaller region id each one's region
     merged into (-1: its region never merges, the lowest id of its component); `key`

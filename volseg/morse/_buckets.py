@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._sizes import SizedByArrays
 from .._task_graph import TaskGraph
 from . import _group_tree
 from ._hierarchy import MorseHierarchy
@@ -29,7 +30,7 @@ __all__ = []
 
 
 @dataclass
-class Bucket:
+class Bucket(SizedByArrays):
     """The maxima ``first`` to ``first + len - 1`` and how each dies (module
     docstring): `gids` its voxel, `values`; `target` (-1: never dies), `source`,
     `saddle` (voxel) and `saddle_value` of its event."""

@@ -33,6 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._distinct import distinct, is_in
+from .._sizes import SizedByArrays
 from . import _block_kernels as kernels
 from . import _kernels
 from ._edges import _saddle_order
@@ -40,7 +41,7 @@ from ._edges import _saddle_order
 __all__ = []
 
 @dataclass
-class _Items:
+class _Items(SizedByArrays):
     """A group's undecided edges: between the nodes `x` and `y` (cells, or their
     representatives), with their original pair (a < b), saddle and saddle value."""
 
@@ -67,7 +68,7 @@ _FIELDS = ("a", "b", "saddle", "value", "x", "y")
 
 
 @dataclass
-class _Group:
+class _Group(SizedByArrays):
     """What a group passes to the group above: its undecided edges and its six faces'
     cells (axis 0 low, axis 0 high, axis 1 low, ...; empty on the volume's boundary)."""
 

@@ -11,6 +11,7 @@ from dataclasses import field as dataclass_field
 import numpy as np
 from numpy.typing import NDArray
 
+from .._sizes import SizedByArrays
 from . import _kernels, _measures, _prune, _prune_groups
 from ._graph import grid_offsets
 from ._measures import check_measure
@@ -67,7 +68,7 @@ def check_measure_cut(min_persistence=None, n_regions=None, measure="persistence
 
 
 @dataclass(eq=False)
-class MorseHierarchy:
+class MorseHierarchy(SizedByArrays):
     """The descending Morse complex of a field and its merge hierarchy.
 
     Attributes

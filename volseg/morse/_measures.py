@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._sizes import SizedByArrays
 from . import _prune
 from ._block_cells import block_cells, block_counts, gathered
 from ._block_objects import per_block
@@ -147,7 +148,7 @@ def _total(n_max, weight, unit, ids, sums):
 
 
 @dataclass(frozen=True)
-class _Events:
+class _Events(SizedByArrays):
     """The three event arrays `_cell_saddles` reads."""
 
     source: np.ndarray

@@ -34,6 +34,7 @@ import numba
 import numpy as np
 
 from .._distinct import index_type
+from .._sizes import SizedByArrays
 from .._union_find import find_root
 from ._group_tree import block_tree
 from ._prune import _before, _joined, _meld, _rekeyed, _remove, _sift_down
@@ -157,7 +158,7 @@ def _block_neighbours(top, u, v, child, sibling, parent, blocked, stack):
             c = sibling[c]
 
 
-class GroupState:
+class GroupState(SizedByArrays):
     """What a group holds, or passes up: its regions (ids `rid` increasing, exact
     `key`s) and its edges in sweep order (`event`: the event's identity; `a` the region
     holding one end, `b` the other's, or -1 outside with the lower bound (`out_key`,
