@@ -63,11 +63,11 @@ def _assemble(block, shells, offsets, value):
 
 
 def fresh_copy(x):
-    """`x` (a Dask array) computed again from its sources: `dask.graph_manipulation.clone`
-    with every key renamed. `clone` leaves the keys inside dask's `Task` objects in
-    materialized layers (slicing, transposing) as they were, so its copy then failed
-    to fuse ("Cannot fuse tasks with multiple outputs", dask issue 12455) or read the
-    original's tasks after all: those are renamed here."""
+    """`x` (a Dask array) computed again from its sources: `dask.graph_manipulation.clone`,
+    which leaves the keys inside dask's `Task` objects in materialized layers
+    (slicing, transposing, rechunking) as they were, so that its copy failed to fuse
+    ("Cannot fuse tasks with multiple outputs", dask issue 12455) or read the
+    original's tasks after all; here those keys are renamed too."""
     import dask.array as da
     from dask._task_spec import GraphNode
     from dask.base import clone_key, tokenize
@@ -138,11 +138,11 @@ def _assembled_together(*arguments):
 
 def with_halos(arrays, values, fresh):
     """The halos (`with_halo`, `fresh` per array) of several arrays of the same block
-    grid, each block's
-    assembled in one task: an object array of the block grid (chunks of one), each
-    block holding the tuple of that block's halos. A task that reads two halos of one
-    block then waits for one task, not for two that the scheduler may run far apart
-    (on a cluster, each halo held, then moved, until its partner is made)."""
+    grid, each block's made in one task: an object array of the block grid (chunks of
+    one), each block holding the tuple of that block's halos. A task that reads two
+    halos of one block then waits for one task, not for two that the scheduler may
+    run far apart (on a cluster, each halo held, then moved, until its partner is
+    made)."""
     import dask.array as da
     from dask.base import tokenize
     from dask.highlevelgraph import HighLevelGraph
