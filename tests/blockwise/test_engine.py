@@ -333,8 +333,8 @@ def test_a_cut_on_a_cluster_joins_no_hierarchy(measure, monkeypatch):
             key_split(k) for k, t in dask_scheduler.tasks.items() if t.resource_restrictions])
     sizes, names = largest.largest, largest.names
     assert lazy.n_maxima > 3000 and not restricted
-    assert "joined" not in names and "volseg-morse-buckets" in names, names
-    assert (measure == "hypervolume") == ("volseg-morse-prune" in names)
+    assert "joined" not in names and "bucket-morse-buckets" in names, names
+    assert (measure == "hypervolume") == ("pruned_leaf-morse-prune" in names)
     whole = 40 * lazy.n_maxima
     sizes.pop("finalize-hlgfinalizecompute")      # this test's own gather of the labels
     assert max(sizes.values()) < whole / 4, sorted(sizes.items(), key=lambda i: -i[1])[:5]
