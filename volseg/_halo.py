@@ -130,10 +130,10 @@ def with_halo(x, value, fresh: bool = False):
 def _assembled_together(*arguments):
     """The halos of one block of several arrays, as one object (a 1x..x1 object
     block holding their tuple)."""
+    from ._task_graph import _one_object
+
     halos = tuple(_assemble(*args) for args in arguments)
-    out = np.empty((1,) * halos[0].ndim, dtype=object)
-    out[(0,) * halos[0].ndim] = halos
-    return out
+    return _one_object(halos, halos[0].ndim)
 
 
 def with_halos(arrays, values, fresh):
