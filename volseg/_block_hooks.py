@@ -56,6 +56,10 @@ class BlockHooks:
     scratch : str, optional
         A folder for large per-block intermediates a later pass reads (the Morse
         ascent's path ends); None: recomputed instead.
+    threads : int, optional
+        The threads that run the tasks at once (a local engine's), which sets how
+        finely the Morse stage splits its exchanges (`volseg.morse._blocks`); None:
+        not known (a running cluster may grow), split as for a large cluster.
     """
 
     wrap: Callable = _unwrapped
@@ -64,6 +68,7 @@ class BlockHooks:
     store: Callable | None = None
     reread: bool = False
     scratch: str | None = None
+    threads: int | None = None
 
 
 def compute(hooks: BlockHooks | None, *collections, stage: str):

@@ -148,8 +148,11 @@ def test_leaves_double_until_about_two_per_bucket():
     assert _bucket_prune.leaf_grid((1024,) * 3, 32) == (256, (4, 4, 4))
     assert _bucket_prune.leaf_grid((4096,) * 3, 256) == (512, (8, 8, 8))
     assert _bucket_prune.leaf_grid((100, 30, 20), 1) == (64, (2, 1, 1))
-    assert _bucket_prune.leaf_grid((10, 10, 10), 4, 2) == (8, (2, 2, 2))
-    assert _bucket_prune.leaf_grid((10, 10, 10), 1, 2) == (16, (1, 1, 1))
+    # Never fewer than allowed by `MIN_LEAVES` (64), however few the buckets.
+    assert _bucket_prune.leaf_grid((1024,) * 3, 8) == (256, (4, 4, 4))
+    assert _bucket_prune.leaf_grid((10, 10, 10), 4, 2) == (4, (3, 3, 3))
+    assert _bucket_prune.leaf_grid((9, 9, 9), 1, 2) == (4, (3, 3, 3))
+    assert _bucket_prune.leaf_grid((9, 9, 9), 63, 2) == (2, (5, 5, 5))      # 125 <= 126
 
 
 def test_the_keys_come_down_the_tree_or_it_is_an_error():
@@ -297,6 +300,29 @@ def test_buckets_grow_past_2048_cubed_so_each_stays_small():
     assert _blocks._bucket_count(4096, 2048**3) == 32
     assert _blocks._bucket_count(32768, 4096**3) == 256          # 17 M maxima at most each
     assert 4096**3 * 0.064 / 256 * 40 < 0.75 * 2**30
+    # Fewer on few threads (4 per thread), never fewer than the size asks.
+    assert _blocks._bucket_count(64, 1024**3, threads=2) == 8
+    assert _blocks._bucket_count(64, 1024**3, threads=1) == 4
+    assert _blocks._bucket_count(64, 1024**3, threads=64) == 32
+    assert _blocks._bucket_count(4096, 2048**3, threads=2) == 32
+    assert _blocks._bucket_count(32768, 4096**3, threads=2) == 256
+
+
+@pytest.mark.parametrize("threads", [1, 2, None])
+def test_the_engines_threads_set_the_buckets_not_the_cut(threads, never_joined, small_leaves):
+    # The bucket count follows the engine's threads (`BlockHooks.threads`); every cut
+    # stays the in-memory one.
+    from volseg._block_hooks import BlockHooks
+
+    field = np.round(smooth_random_field((14, 12, 10), np.random.default_rng(9), sigma=0.5)
+                     * 20)                                   # plateaus and tied saddles
+    lazy = descending_complex(da.from_array(field, chunks=(2, 3, 2)), on_workers=True,
+                              block_hooks=BlockHooks(threads=threads))
+    assert len(lazy.buckets) == {1: 4, 2: 8, None: 32}[threads]
+    both = (lazy, descending_complex(field))
+    for measure in ("persistence", "size", "hypervolume"):
+        for asked in (dict(n_regions=5), dict(n_regions="auto")):
+            _cut_both(both, CutRequest.checked(measure=measure, **asked))
 
 
 def test_a_thinned_curve_is_sampled_at_the_same_ranks(never_joined):

@@ -344,6 +344,14 @@ def test_a_cut_on_a_cluster_joins_no_hierarchy(measure, monkeypatch):
     assert report.curve.n_components < report.n_components     # some were dropped
 
 
+def test_the_engine_knows_its_threads_where_it_makes_them():
+    # What sets the Morse stage's bucket count (`BlockHooks.threads`).
+    Engine = engine_module.Engine
+    assert Engine("threads", workers=3).threads == 3
+    assert Engine("local", workers=2, threads_per_worker=2).threads == 4
+    assert Engine("tcp://127.0.0.1:8786").threads is None      # a running cluster may grow
+
+
 @pytest.mark.slow
 def test_a_local_worker_of_two_threads_gives_the_labels_of_the_threads(tmp_path, volume):
     """``--threads-per-worker 2``: one worker process whose two threads run the blocks

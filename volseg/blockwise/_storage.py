@@ -111,7 +111,8 @@ class BlockwiseStorage(Storage):
             self.say(f"resuming from finished blocks in {self.work.folder} ({done})")
         self.block_hooks = BlockHooks(wrap=self.work.wrap, compute=self._run,
                                       persist=self._persist, store=self._store, reread=True,
-                                      scratch=str(self.work.folder / "ends"))
+                                      scratch=str(self.work.folder / "ends"),
+                                      threads=self.engine.threads if self.engine else None)
 
     def _store(self, stage: str, blocks):
         """Blocks wrapped by ``work.wrap(stage, ...)``, computed once into the work

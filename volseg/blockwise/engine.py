@@ -186,6 +186,14 @@ class Engine:
     def threaded(self) -> bool:
         return self.scheduler in (None, "threads")
 
+    @property
+    def threads(self) -> int | None:
+        """The threads that run tasks at once: known for threads and the local cluster
+        (its hierarchy worker aside), None for a running cluster (it may grow)."""
+        if self.threaded:
+            return self.workers
+        return self.workers * self.threads_per_worker if self.scheduler == "local" else None
+
     def describe(self) -> str:
         if self.threaded:
             return f"Dask threads ({self.workers})"

@@ -327,7 +327,8 @@ def _ids_and_exits(ascent, grid: _Grid, hooks) -> tuple:
     summaries = {i: graph(only, (ascent.name, *i)) for i in order}
     ranks, total, buckets = _ranks.ranks_of(graph, [graph(_maxima_of, summaries[i])
                                                     for i in order],
-                                            _bucket_count(len(order), int(np.prod(grid.shape))))
+                                            _bucket_count(len(order), int(np.prod(grid.shape)),
+                                                          hooks.threads))
     ranks = dict(zip(order, ranks, strict=True))
     groups = _group_tree.block_tree(shape)
     face_map, exits, down, halves = [], [], {}, {}
@@ -383,14 +384,23 @@ def _maxima_of(summary):
 #: Voxels per bucket of maximum ids past 32 buckets: 2^28 voxels hold up to 17 M maxima
 #: at an 8-bit field's 6.4 %, 0.7 GB of a bucket's events (40 B each).
 VOXELS_PER_BUCKET = 2 ** 28
+#: Buckets for the parallelism alone: `BUCKETS_PER_THREAD` per thread that runs tasks,
+#: at most `PARALLEL_BUCKETS` (also the count when the threads are not known).
+BUCKETS_PER_THREAD = 4
+PARALLEL_BUCKETS = 32
 
 
-def _bucket_count(n_blocks: int, n_voxels: int) -> int:
+def _bucket_count(n_blocks: int, n_voxels: int, threads: int | None = None) -> int:
     """Buckets of the maxima's sample sort, which then hold the hierarchy (`_buckets`):
-    32 up to 2048^3 voxels (few enough that the blocks x buckets pieces stay a small
-    graph), then one per `VOXELS_PER_BUCKET` (256 at 4096^3), so that a bucket stays
-    small next to a worker; never more than the blocks."""
-    return max(1, min(n_blocks, max(32, n_voxels // VOXELS_PER_BUCKET)))
+    enough for the parallelism (`BUCKETS_PER_THREAD` per thread, at most
+    `PARALLEL_BUCKETS`: few enough that the blocks x buckets pieces stay a small graph),
+    and at least one per `VOXELS_PER_BUCKET` (256 at 4096^3), so that a bucket stays
+    small next to a worker; never more than the blocks. Every exchange with the
+    buckets is a task per piece, about 1 ms each on a cluster: on 2 threads, 8 buckets
+    instead of 32 make 4x to 16x fewer."""
+    parallel = (PARALLEL_BUCKETS if threads is None
+                else min(PARALLEL_BUCKETS, BUCKETS_PER_THREAD * max(int(threads), 1)))
+    return max(1, min(n_blocks, max(parallel, n_voxels // VOXELS_PER_BUCKET)))
 
 
 def _cells(halo, tables, chunks, grid: _Grid, id_type, hooks):
