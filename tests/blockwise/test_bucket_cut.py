@@ -333,3 +333,22 @@ def test_a_thinned_curve_is_sampled_at_the_same_ranks(never_joined):
     field = smooth_random_field((48, 48, 48), np.random.default_rng(2), sigma=0.4)
     report = _cut_both(_both(field, 12), CutRequest.checked(min_persistence=0.01))
     assert report.curve.n_positive > EXACT and len(report.curve) < report.curve.n_positive
+
+
+@pytest.mark.parametrize("chunks", [(2, 3, 2), (5, 7, 4), (14, 12, 10)])
+@pytest.mark.parametrize("masked", [False, True])
+def test_each_blocks_cells_from_its_table_are_those_of_its_voxels(chunks, masked):
+    # The cut's passes route by each block's distinct cells, found from the cells
+    # pass's tables (`_block_cells.table_cells`), not by reading the cells again.
+    from volseg.morse._block_cells import block_cells
+
+    field = np.round(smooth_random_field((14, 12, 10), np.random.default_rng(3), sigma=0.5)
+                     * 20)                                   # plateaus
+    mask = (np.random.default_rng(1).random(field.shape) > 0.2) if masked else None
+    lazy = descending_complex(da.from_array(field, chunks=chunks), mask=mask, on_workers=True)
+    from_tables, = dask.compute(lazy._block_cells())
+    from_voxels, = dask.compute(block_cells(lazy.cells))
+    assert from_tables.shape == from_voxels.shape
+    for a, b in zip(from_tables.flat, from_voxels.flat, strict=True):
+        assert a.dtype == b.dtype and np.array_equal(a, b)
+    assert sum(len(a) for a in from_tables.flat) >= lazy.n_maxima > 50

@@ -50,6 +50,7 @@ from .._halo import block_starts, with_halo, with_halos
 from .._task_graph import TaskGraph, _one_object
 from . import _block_kernels as kernels
 from . import _buckets, _exits, _group_tree, _measures, _ranks
+from ._block_cells import table_cells
 from ._block_objects import only, per_block
 from ._edges import _cross_edges, spanning_forest
 from ._graph import _Neighbourhood, grid_offsets
@@ -261,6 +262,9 @@ def dask_hierarchy(field, connectivity="kuhn", mask=None, hooks=None) -> Hierarc
         h, grid.origin(block_id), grid.shape, grid.offsets, grid.masked,
         grid.ends_file(block_id))), halo)
     tables, maxima = _ids_and_exits(ascent, grid, hooks)
+    # Each block's distinct cells, from its table: what the cut's passes route by.
+    block_ids, = hooks.persist(table_cells(tables, maxima.index_type),
+                               stage="Morse: each block's cells, from its table")
     phases.done("blocks and block groups: steepest ascent, maxima ids, exits")
     cells = _cells(halo, tables, values.chunks, grid, maxima.index_type, hooks)
     del tables     # held by the cells' graph only: storing may free them
@@ -289,7 +293,7 @@ def dask_hierarchy(field, connectivity="kuhn", mask=None, hooks=None) -> Hierarc
     core = dask.delayed(_buckets.joined, pure=True)(shape, *buckets)
     return HierarchyOnWorkers(core, maxima.n_maxima, shape, cells, mask, field, connectivity,
                               phases.times, hooks, field_range=maxima.low_high,
-                              buckets=buckets, firsts=firsts)
+                              buckets=buckets, firsts=firsts, _blocks=block_ids)
 
 
 def _checked_field(field, mask):
