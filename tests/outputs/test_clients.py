@@ -157,6 +157,47 @@ def test_ngff_pyramids_sample_labels_and_average_curvature(tmp_path):
         np.testing.assert_allclose(translation["translation"], np.array([3.0, 2.0, 1.0]) * shift)
 
 
+def test_ngff_written_in_blocks_of_chunks_the_same_from_any_blocks(tmp_path):
+    """A Dask result in odd blocks writes the image a numpy one does, byte for byte in
+    its arrays and metadata (64^3 chunks, means rounded once), each task a block of
+    chunks: a task per 64^3 chunk was most of a 1024^3 run's tasks on a cluster."""
+    import json
+
+    import dask.array as da
+    import zarr
+    from dask.callbacks import Callback
+
+    from volseg.io import Frame, write_ngff
+
+    rng = np.random.default_rng(2)
+    labels = rng.integers(0, 9, (300, 260, 140)).astype(np.uint8)
+    curvature = rng.normal(size=labels.shape)
+    frame = Frame.from_spacing((0.5, 1.0, 2.0))
+    write_ngff(tmp_path / "memory.ome.zarr", labels, curvature, frame)
+    write_ngff(tmp_path / "blocks.ome.zarr", da.from_array(labels, chunks=(100, 64, 70)),
+               da.from_array(curvature, chunks=(100, 64, 70)), frame)
+    tasks = []
+    with Callback(pretask=lambda key, dask, state: tasks.append(key)):
+        write_ngff(tmp_path / "aligned.ome.zarr", da.from_array(labels, chunks=(256, 256, 140)),
+                   da.from_array(curvature, chunks=(256, 256, 140)), frame)
+    chunks = -(-300 // 64) * -(-260 // 64) * -(-140 // 64)       # 5 x 5 x 3 at level 0
+    assert len(tasks) < chunks, len(tasks)     # a task per chunk and its rechunk: 813 tasks
+    paths = sorted(p.relative_to(tmp_path / "memory.ome.zarr")
+                   for p in (tmp_path / "memory.ome.zarr").rglob("*") if p.is_file())
+    assert paths == sorted(p.relative_to(tmp_path / "blocks.ome.zarr")
+                           for p in (tmp_path / "blocks.ome.zarr").rglob("*") if p.is_file())
+    for path in paths:
+        one, other = (tmp_path / run / path for run in ("memory.ome.zarr", "blocks.ome.zarr"))
+        if path.name == "zarr.json":
+            assert json.loads(one.read_text()) == json.loads(other.read_text()), path
+    for level in ("s0", "s1", "s2", "labels/regions/s0", "labels/regions/s1",
+                  "labels/regions/s2"):
+        one, other = (zarr.open_array(str(tmp_path / run / level), mode="r")
+                      for run in ("memory.ome.zarr", "blocks.ome.zarr"))
+        assert one.chunks == tuple(min(64, n) for n in one.shape)
+        np.testing.assert_array_equal(one[...], other[...])
+
+
 def test_isosurface_series_in_world_space_with_real_time_and_normals(tmp_path):
     """A 4-D NIfTI, rotated, translated, 2.5 s per step: the .pvd's time values are
     0, 2.5, 5, ..., every .vtu (read with VTK's XML reader, ParaView's) sits in the

@@ -31,6 +31,9 @@ __all__ = ["write_ngff", "write_labels_into", "recover_labels", "is_ome_image", 
 
 #: Chunk edge of every level (64^3: 256 KB of uint8 labels, 1 MB of float32).
 NGFF_CHUNK = 64
+#: Edge of a numpy input's write blocks: each task writes 4^3 chunks (a Dask input's
+#: blocks are kept, rounded up to whole chunks).
+WRITE_BLOCK = 4 * NGFF_CHUNK
 #: Every chunk is written, all-zero ones too: Zarr skips chunks of the fill value by
 #: default, and volseg's reader refuses a store with missing chunks (one that was never
 #: written whole reads as zeros), so it would refuse its own output's background.
@@ -49,23 +52,26 @@ def pyramid_levels(shape) -> int:
     return levels
 
 
-def _level0(array, order):
+def _level0(array, order, blocks=None):
     """An (X, Y, Z) numpy or Dask array as a level 0: lazy, its axes in `order`, in
-    NGFF chunks."""
+    NGFF chunks, or (`blocks`: a numpy input's edge) in write blocks
+    (`_in_write_blocks`)."""
     import dask.array as da
 
-    base = array if hasattr(array, "dask") else da.from_array(np.asarray(array),
-                                                             chunks=NGFF_CHUNK)
-    return base.transpose(*order).rechunk(NGFF_CHUNK)
+    if not hasattr(array, "dask"):
+        array = da.from_array(np.asarray(array), chunks=blocks or NGFF_CHUNK)
+    level = array.transpose(*order)
+    return level.rechunk(NGFF_CHUNK) if blocks is None else _in_write_blocks(level)
 
 
-def _label_pyramid(labels, order) -> list:
+def _label_pyramid(labels, order, blocks=None) -> list:
     """`_level0` of `labels` and the levels below it, each every second voxel of the
     one above (labels are never blended; a level's first voxel centre stays level
     0's)."""
-    levels = [_level0(labels, order)]
+    levels = [_level0(labels, order, blocks)]
     for _ in range(pyramid_levels(levels[0].shape)):
-        levels.append(levels[-1][::2, ::2, ::2].rechunk(NGFF_CHUNK))
+        below = levels[-1][::2, ::2, ::2]
+        levels.append(below.rechunk(NGFF_CHUNK) if blocks is None else _in_write_blocks(below))
     return levels
 
 
@@ -85,15 +91,54 @@ def _with_translations():
         yield
 
 
+def _mean64(values, axis=None):
+    """The mean in float64, then rounded once: the same whatever the blocks' shapes (a
+    float32 mean's rounding followed numpy's order of summing, which they change)."""
+    return np.mean(values, axis=axis, dtype=np.float64)
+
+
+def _in_write_blocks(level):
+    """`level` (Dask) in regular blocks of whole NGFF chunks (the last may be short):
+    its own blocks' edge rounded up to a multiple of `NGFF_CHUNK`, so that no two tasks
+    write one chunk and a task writes a block of them."""
+    edges = tuple(max(-(-max(c) // NGFF_CHUNK), 1) * NGFF_CHUNK for c in level.chunks)
+    return level.rechunk(edges)
+
+
+def _written_levels(levels, group, axes, transforms, name) -> list:
+    """Lazy writes of `levels` as `group`'s arrays s0, s1, ... in `NGFF_CHUNK` chunks,
+    each task a block of chunks (`_in_write_blocks`), and their ``multiscales``
+    metadata, which ome-zarr-py writes. Through ome-zarr-py's own writer each chunk of
+    64^3 was a task of its own, with the rechunks before it: 41 567 tasks for a 1024^3
+    result's image, most of the run's tasks on a cluster."""
+    import dask.array as da
+
+    with warnings.catch_warnings():     # its own deprecated default argument, at import
+        warnings.simplefilter("ignore", DeprecationWarning)
+        from ome_zarr.writer import write_multiscales_metadata
+
+    writes = []
+    for i, level in enumerate(levels):
+        component = f"{group.path}/s{i}" if group.path else f"s{i}"
+        writes.append(da.to_zarr(
+            _in_write_blocks(level), url=group.store, component=component, compute=False,
+            zarr_format=3, chunks=tuple(min(NGFF_CHUNK, max(int(n), 1)) for n in level.shape),
+            dimension_names=[a["name"] for a in axes], **STORAGE))
+    write_multiscales_metadata(group, [{"path": f"s{i}", "coordinateTransformations": t}
+                                       for i, t in enumerate(transforms)], axes=axes, name=name)
+    return writes
+
+
 def write_ngff(path, labels, curvature, frame: Frame) -> Path:
     """Write `labels` and `curvature` ((X, Y, Z) numpy or Dask arrays, one shape) as
     the OME-Zarr image `path` (a new folder; its parent must exist)."""
+    import dask
     import dask.array as da
     import zarr
 
     with warnings.catch_warnings():     # its own deprecated default argument, at import
         warnings.simplefilter("ignore", DeprecationWarning)
-        from ome_zarr.writer import write_multiscale, write_multiscale_labels
+        from ome_zarr.writer import write_label_metadata
 
     path = Path(path)
     if tuple(labels.shape) != tuple(curvature.shape) or len(labels.shape) != 3:
@@ -102,25 +147,23 @@ def write_ngff(path, labels, curvature, frame: Frame) -> Path:
     spacing = np.array(frame.spacing)[::-1]            # z, y, x
     origin = frame.affine[:3, 3][::-1]
     axes = _space_axes("zyx", [frame.unit] * 3)
-    label_levels = _label_pyramid(labels, (2, 1, 0))
+    label_levels = _label_pyramid(labels, (2, 1, 0), WRITE_BLOCK)
     levels = len(label_levels) - 1
-    mean_levels = [_level0(curvature, (2, 1, 0)).astype(np.float32)]
+    mean_levels = [_level0(curvature, (2, 1, 0), WRITE_BLOCK).astype(np.float32)]
     for _ in range(levels):
-        mean_levels.append(da.coarsen(np.mean, mean_levels[-1], {0: 2, 1: 2, 2: 2},
-                                      trim_excess=True).astype(np.float32).rechunk(NGFF_CHUNK))
+        mean_levels.append(_in_write_blocks(da.coarsen(
+            _mean64, mean_levels[-1], {0: 2, 1: 2, 2: 2}, trim_excess=True).astype(np.float32)))
     # Level i's voxel size is 2^i of level 0's; nearest sampling keeps level 0's first
     # voxel centre, a 2^i mean's centre is (2^i - 1) / 2 voxels further.
     label_transforms = [_transforms(spacing * 2**i, origin) for i in range(levels + 1)]
     mean_transforms = [_transforms(spacing * 2**i, origin + spacing * (2**i - 1) / 2)
                        for i in range(levels + 1)]
     root = zarr.open_group(str(path), mode="w-")
-    with _with_translations():
-        write_multiscale(mean_levels, root, name="curvature", axes=axes,
-                         coordinate_transformations=mean_transforms, storage_options=STORAGE)
-        write_multiscale_labels(label_levels, root, name="regions", axes=axes,
-                                coordinate_transformations=label_transforms,
-                                label_metadata={"source": {"image": "../../"}},
-                                storage_options=STORAGE)
+    writes = _written_levels(mean_levels, root, axes, mean_transforms, "curvature")
+    writes += _written_levels(label_levels, root.require_group("labels/regions"), axes,
+                              label_transforms, "regions")
+    dask.compute(*writes)
+    write_label_metadata(root["labels"], "regions", source={"image": "../../"})
     return path
 
 
