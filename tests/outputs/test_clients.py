@@ -158,8 +158,8 @@ def test_ngff_pyramids_sample_labels_and_average_curvature(tmp_path):
 
 
 def test_ngff_written_in_blocks_of_chunks_the_same_from_any_blocks(tmp_path):
-    """A Dask result in odd blocks writes the image a numpy one does, byte for byte in
-    its arrays and metadata (64^3 chunks, means rounded once), each task a block of
+    """A Dask result in odd blocks writes the image a numpy one does: the same files,
+    metadata and values (64^3 chunks, means rounded once), each task a block of
     chunks: a task per 64^3 chunk was most of a 1024^3 run's tasks on a cluster."""
     import json
 
