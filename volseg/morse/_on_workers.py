@@ -25,7 +25,7 @@ from .._block_hooks import BlockHooks
 from . import _bucket_cut as in_buckets
 from . import _bucket_prune as pruning
 from . import _measures
-from ._block_cells import block_cells, block_counts, gathered, looked_up
+from ._block_cells import block_counts, gathered, looked_up
 from ._curve import CurveSample, sample_ranks
 from ._hierarchy import MorseHierarchy, checked_weight, region_table
 from ._measures import lazy_cell_measures
@@ -47,7 +47,7 @@ class HierarchyOnWorkers:
     reading anything else of `MorseHierarchy` (``maxima``, ``segment``, ...) fetches
     it whole to the client, once (`fetch`), so the handle is a `MorseHierarchy` to a
     caller that needs one. `field_range`: the field's (min, max) in the mask, as the
-    ascent found it.
+    ascent found it. `_blocks`: each block's distinct cells (`_block_cells`).
     """
 
     core: object
@@ -215,11 +215,8 @@ class HierarchyOnWorkers:
         return looked_up(self.cells, ids, labels, np.int32), top, curve
 
     def _block_cells(self):
-        """Each block's distinct cells (`_block_cells.block_cells`), found once and kept
-        on the workers."""
-        if self._blocks is None:
-            self._blocks, = self.hooks.persist(block_cells(self.cells),
-                                               stage="Morse: each block's cells")
+        """Each block's distinct cells, kept on the workers (persisted by the build from
+        the blocks' tables, `_block_cells.table_cells`)."""
         return self._blocks
 
 
