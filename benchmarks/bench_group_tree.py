@@ -50,7 +50,8 @@ def main(argv=None) -> int:
 
     from volseg import descending_complex, grid_curvature
     from volseg.io import read_zarr
-    from volseg.morse import _exits, _group_tree
+    from volseg.morse import _group_tree
+    from volseg.morse.blocks import _exits
 
     records = defaultdict(list)
     decide = _group_tree.decide

@@ -15,8 +15,6 @@ ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = Path(volseg.__file__).resolve().parent
 #: Generated code (the curvature stencils, written by `_stencil_codegen`).
 GENERATED = {"volseg.curvature._grid_stencil"}
-#: Deprecated aliases of moved modules (they only re-export).
-SHIMS = {"volseg.preview", "volseg.engine", "volseg.spacetime_outputs"}
 MAX_FUNCTION_LINES = 60
 
 
@@ -73,19 +71,23 @@ def _package_of(module: str) -> str:
     return module
 
 
+#: Public leaves: what every package may raise or warn with.
+PUBLIC_LEAVES = {"volseg.errors"}
+
+
 def _is_leaf(module: str) -> bool:
-    """A shared leaf: a private top-level module that imports nothing of volseg but
-    other leaves (checked by `test_leaves_import_only_leaves`)."""
+    """A shared leaf: a private top-level module (or one of `PUBLIC_LEAVES`) that
+    imports nothing of volseg but other leaves (checked by
+    `test_leaves_import_only_leaves`)."""
     name = module.split(".")
-    return (len(name) == 2 and name[1].startswith("_") and not name[1].startswith("__")
-            and _package_of(module) == module)
+    return module in PUBLIC_LEAVES or (
+        len(name) == 2 and name[1].startswith("_") and not name[1].startswith("__")
+        and _package_of(module) == module)
 
 
 def _graph() -> dict:
     graph = {}
     for module in MODULES:
-        if module in SHIMS:
-            continue
         graph[module] = set()
         for target, _, _ in _imports(module):
             if target in MODULES and target != module and target != "volseg":
@@ -117,8 +119,6 @@ def test_imports_have_no_cycle():
 def test_no_private_name_is_imported_across_packages():
     offences = []
     for module in MODULES:
-        if module in SHIMS:
-            continue
         own = _package_of(module)
         for target, name, line in _imports(module):
             if target not in MODULES or _package_of(target) == own or _is_leaf(target):
@@ -148,6 +148,79 @@ def test_morse_stands_alone():
         for target, _, line in _imports(module):
             assert _package_of(target) == "volseg.morse" or _is_leaf(target), \
                 f"{module}:{line} imports {target}"
+
+
+def _top_level_imports(module: str):
+    """(imported module, line) of `module`'s imports outside any function."""
+    path = MODULES[module]
+    for node in ast.parse(path.read_text()).body:
+        if isinstance(node, ast.ImportFrom):
+            target = _resolve(module, path, node)
+            for alias in node.names:
+                sub = f"{target}.{alias.name}"
+                yield (sub if sub in MODULES else target), node.lineno
+        elif isinstance(node, ast.Import):
+            for alias in node.names:
+                yield alias.name, node.lineno
+
+
+def test_the_in_memory_morse_stage_never_loads_the_distributed_build():
+    """`volseg.morse` outside `volseg.morse.blocks` imports neither Dask nor the
+    distributed build at module level (a Dask field reaches them inside the call)."""
+    offences = []
+    for module in MODULES:
+        if _package_of(module) != "volseg.morse" or module.startswith("volseg.morse.blocks"):
+            continue
+        for target, line in _top_level_imports(module):
+            if target.startswith(("volseg.morse.blocks", "dask", "distributed")):
+                offences.append(f"{module}:{line} imports {target}")
+    assert not offences, "\n".join(offences)
+
+
+def test_descending_complex_on_numpy_imports_no_dask():
+    import subprocess
+    import sys
+
+    code = ("import sys, numpy as np\n"
+            "from volseg.morse import descending_complex\n"
+            "h = descending_complex(np.random.default_rng(0).random((9, 8, 7)))\n"
+            "h.segment(n_regions=3); h.segment(n_regions=3, measure='hypervolume')\n"
+            "print(sorted({m.split('.')[0] for m in sys.modules} & {'dask', 'distributed'}))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True)
+    assert out.stdout.strip() == "[]", out.stdout + out.stderr
+
+
+#: How a measure's name would be compared to a literal: ``== "size"``, ``in ("size", ...)``,
+#: ``"size" in measures``, ``.measure != 'persistence'``.
+_NAMES = "(persistence|size|hypervolume|height|area|volume)"
+_COMPARED = [rf"[=!]=\s*['\"]{_NAMES}['\"]", rf"['\"]{_NAMES}['\"]\s*[=!]=",
+             rf"(not\s+)?in\s*[(\[{{]\s*(None,\s*)?['\"]{_NAMES}['\"]",
+             rf"['\"]{_NAMES}['\"]\s+(not\s+)?in\s+\w*measure"]
+
+
+def test_no_module_compares_measure_names():
+    """A measure is a registry entry (`volseg.morse.MEASURE_REGISTRY`): code asks the
+    entry (``get_measure(m).pruned``), never compares the name to a literal."""
+    import re
+
+    offences = []
+    for module, path in MODULES.items():
+        for number, line in enumerate(path.read_text().splitlines(), 1):
+            code = line.split("#")[0]
+            if any(re.search(pattern, code) for pattern in _COMPARED):
+                offences.append(f"{module}:{number}: {line.strip()}")
+    assert not offences, "\n".join(offences)
+
+
+def test_the_measure_search_finds_a_comparison():
+    import re
+
+    planted = ['if measure == "persistence":', "if cut.measure != 'size':",
+               'x = m in ("persistence", "size")', 'if "hypervolume" in measures:']
+    for line in planted:
+        assert any(re.search(p, line) for p in _COMPARED), line
+    assert not any(re.search(p, 'measure = PERSISTENCE.name') for p in _COMPARED)
 
 
 def _code_lines(lines, node) -> int:

@@ -110,30 +110,6 @@ def test_regions_auto_picks_the_largest_gap_in_the_papers_range():
     assert result.n_regions == max(gaps, key=gaps.get)
 
 
-def test_old_argument_names_warn_and_give_the_same_result():
-    from volseg.curvature import grid_curvature
-    from volseg.tessellation import sphere
-
-    data = np.random.default_rng(3).random((9, 8, 7))
-    new = segment_volume(data, smooth_sigma=1.0, padding="mirror", n_regions=4)
-    with pytest.warns(DeprecationWarning, match="`smooth` is deprecated"):
-        old = segment_volume(data, smooth=1.0, padding="mirror", n_regions=4)
-    np.testing.assert_array_equal(old.labels, new.labels)
-    with pytest.warns(DeprecationWarning, match="`boundary` is deprecated"):
-        np.testing.assert_array_equal(grid_curvature(data, boundary="mirror"),
-                                      grid_curvature(data, padding="mirror"))
-    with pytest.warns(DeprecationWarning, match="smooth_sigma"):
-        assert new.smooth == 1.0
-    with pytest.raises(ValueError, match="not both"):
-        segment_volume(data, smooth=1.0, smooth_sigma=2.0)
-    v, s = sphere(dim=2, radius=1.0, subdivisions=2)
-    with pytest.warns(DeprecationWarning, match="`smooth` is deprecated"):
-        old_mesh = segment_mesh(v, s, n_regions=3, smooth=2)
-    np.testing.assert_array_equal(old_mesh.labels,
-                                  segment_mesh(v, s, n_regions=3, smooth_rounds=2).labels)
-    assert old_mesh.smooth_rounds == 2 and old_mesh.smooth_sigma == 0.0
-
-
 @pytest.mark.parametrize("rounds", [2.5, -1, True, "3"])
 def test_mesh_smoothing_rounds_must_be_whole(rounds):
     from volseg.tessellation import sphere
@@ -141,20 +117,6 @@ def test_mesh_smoothing_rounds_must_be_whole(rounds):
     v, s = sphere(dim=2, radius=1.0, subdivisions=1)
     with pytest.raises(ValueError, match="`smooth_rounds` must be a whole number"):
         segment_mesh(v, s, smooth_rounds=rounds)
-
-
-def test_moved_modules_warn_and_keep_their_names():
-    import importlib
-    import sys
-
-    for old, new in (("volseg.preview", "volseg.outputs.preview"),
-                     ("volseg.engine", "volseg.blockwise.engine"),
-                     ("volseg.spacetime_outputs", "volseg.outputs.spacetime")):
-        sys.modules.pop(old, None)
-        with pytest.warns(DeprecationWarning, match=new):
-            module = importlib.import_module(old)
-        target = importlib.import_module(new)
-        assert all(getattr(module, name) is getattr(target, name) for name in target.__all__)
 
 
 def _two_bump_sphere(n):

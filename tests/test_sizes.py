@@ -5,8 +5,8 @@ import numpy as np
 from dask.sizeof import sizeof
 
 from volseg._sizes import SizedByArrays, held_bytes
-from volseg.morse._buckets import Bucket
 from volseg.morse._prune_groups import GroupState
+from volseg.morse.blocks._buckets import Bucket
 
 
 def test_a_bucket_and_a_group_count_their_arrays():

@@ -43,8 +43,6 @@ _PUBLIC = {
 _SUBMODULES = {"io", "mesh", "curvature", "tessellation", "morse", "metrics", "masks",
                "segment", "analytic", "noise", "outputs", "blockwise", "datasets", "files",
                "errors", "spacetime", "cli"}
-#: Moved modules, still reachable as attributes for one release (they warn).
-_DEPRECATED = {"preview", "engine", "spacetime_outputs"}
 
 __all__ = ["__version__", *_PUBLIC, *sorted(_SUBMODULES)]
 
@@ -52,7 +50,7 @@ __all__ = ["__version__", *_PUBLIC, *sorted(_SUBMODULES)]
 def __getattr__(name):
     if name in _PUBLIC:
         value = getattr(import_module(_PUBLIC[name]), name)
-    elif name in _SUBMODULES or name in _DEPRECATED:
+    elif name in _SUBMODULES:
         value = import_module(f"volseg.{name}")
     else:
         raise AttributeError(f"module 'volseg' has no attribute {name!r}")

@@ -136,14 +136,3 @@ def smooth(value) -> float:
     return sigma
 
 
-def renamed(new_value, old_value, new: str, old: str, default):
-    """The value of a renamed keyword argument: the new one, or the old one (given,
-    not None) with a DeprecationWarning; both given is an error."""
-    import warnings
-
-    if old_value is None:
-        return new_value
-    if new_value != default:
-        raise ValueError(f"give `{new}`, not both `{new}` and its old name `{old}`")
-    warnings.warn(f"`{old}` is deprecated: use `{new}`", DeprecationWarning, stacklevel=3)
-    return old_value

@@ -19,7 +19,7 @@ from ._version import __version__
 from .blockwise.engine import MEMORY_SHARE, default_memory_limit, parse_bytes
 from .curvature import cli_choices, normalize_operator
 from .errors import UsageError
-from .morse import MEASURES
+from .morse import MEASURES, get_measure
 from .segment import (
     AUTO_INTEGER_SIGMA,
     AUTO_REGION_RANGE,
@@ -265,7 +265,8 @@ def _check_cut_options(args):
     if threshold is not None and not threshold >= 0:
         raise UsageError(f"--threshold must be a non-negative number, got {threshold}")
     measure = getattr(args, "measure", None)
-    if args.min_persistence is not None and measure not in (None, "persistence"):
+    if args.min_persistence is not None and measure is not None \
+            and get_measure(measure).pruned:
         raise UsageError(f"--min-persistence is a threshold of persistence; with --measure "
                          f"{measure} give --threshold")
     share = getattr(args, "min_component", None)

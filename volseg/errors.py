@@ -1,4 +1,4 @@
-"""Every error volseg raises on purpose, in one place (a leaf).
+"""Every error and warning volseg raises on purpose, in one place (a leaf).
 
 All are `ValueError` subclasses: bad input or usage, never a bug. The command line
 turns each into one line on stderr and exit code 2; a Python caller can catch
@@ -6,7 +6,7 @@ turns each into one line on stderr and exit code 2; a Python caller can catch
 """
 
 __all__ = ["VolsegError", "UsageError", "VolumeFileError", "MissingChunksError", "OutputError",
-           "DatasetError", "EngineError"]
+           "DatasetError", "EngineError", "VolsegWarning", "VolsegDeprecationWarning"]
 
 
 class VolsegError(ValueError):
@@ -40,3 +40,14 @@ class DatasetError(VolsegError):
 
 class EngineError(VolsegError):
     """The Dask engine cannot be started or reached as asked."""
+
+
+class VolsegWarning(UserWarning):
+    """A result volseg could make, but not as asked (fewer maxima than regions asked,
+    missing chunks read as the fill value, a degenerate cut). The test suite turns
+    these into errors, so a test that does not expect one fails."""
+
+
+class VolsegDeprecationWarning(DeprecationWarning):
+    """A volseg name or option that will go. Every deprecation volseg gives uses this
+    class, so the tests can fail on ours and never on another package's."""

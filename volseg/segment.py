@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import dataclasses
 import time
-import warnings
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 
@@ -30,9 +29,17 @@ from .curvature import (
     default_value_scale,
     get_operator,
 )
-from .cuts import CutReport, cut_of
 from .masks import MaskChoice, foreground_mask
-from .morse import MorseHierarchy, check_measure_cut, descending_complex
+from .morse import (
+    PERSISTENCE,
+    SIZE,
+    CutReport,
+    MorseHierarchy,
+    check_measure_cut,
+    cut_of,
+    descending_complex,
+    get_measure,
+)
 
 __all__ = ["Segmentation", "SegmentRequest", "CutRequest", "Storage", "InMemory", "run_stages",
            "segment_volume", "segment_mesh", "input_range", "DEFAULT_REGIONS", "DEFAULT_MEASURE",
@@ -92,7 +99,7 @@ class Segmentation:
         The cut as asked (``measure``, ``threshold``, ``n_regions``, and ``auto``
         when the count was chosen at the largest gap of the measure).
     report : CutReport
-        What the cut found (`volseg.cuts.CutReport`): each region's highest
+        What the cut found (`volseg.morse.CutReport`): each region's highest
         maximum, the hierarchy's counts, the measure's curve thinned.
     smooth_sigma : float
         A volume's Gaussian pre-smoothing, sigma in voxels (0: none).
@@ -120,17 +127,10 @@ class Segmentation:
     padding: str | None = None
     vertices: NDArray[np.float64] | None = None
     simplices: NDArray[np.intp] | None = None
-    measure: str = "persistence"
+    measure: str = PERSISTENCE.name
     threshold: float | None = None
     smooth_rule: str = "given"
     report: CutReport | None = None
-
-    @property
-    def smooth(self):
-        """Deprecated: `smooth_sigma` (a volume) or `smooth_rounds` (a mesh)."""
-        warnings.warn("Segmentation.smooth is deprecated: use smooth_sigma (volumes) or "
-                      "smooth_rounds (meshes)", DeprecationWarning, stacklevel=2)
-        return self.smooth_rounds if self.vertices is not None else self.smooth_sigma
 
     def region_maxima(self) -> NDArray[np.int64]:
         """(k,) flat voxel index of each region's highest curvature maximum (region
@@ -193,7 +193,7 @@ class Segmentation:
         results; a viewer reuses its buffer rather than allocating one per cut).
         """
         if measure is None:
-            measure = "persistence" if min_persistence is not None else self.measure
+            measure = PERSISTENCE.name if min_persistence is not None else self.measure
         cut = CutRequest.checked(min_persistence, n_regions, measure=measure,
                                  threshold=threshold,
                                  min_component=self.cut.get("min_component", 0.0))
@@ -216,7 +216,7 @@ class CutRequest:
     threshold: float | None
     n_regions: int | None
     auto: bool
-    measure: str = "persistence"
+    measure: str = PERSISTENCE.name
     min_component: float = 0.0
 
     @classmethod
@@ -225,7 +225,7 @@ class CutRequest:
         """The checked cut; `measure` None: persistence when `min_persistence` is
         given, else `DEFAULT_MEASURE`."""
         if measure is None:
-            measure = "persistence" if min_persistence is not None else DEFAULT_MEASURE
+            measure = PERSISTENCE.name if min_persistence is not None else DEFAULT_MEASURE
         auto = isinstance(n_regions, str) and n_regions == "auto"
         threshold, n_regions, measure = check_measure_cut(
             min_persistence, None if auto else n_regions, measure, threshold)
@@ -237,7 +237,7 @@ class CutRequest:
     @property
     def min_persistence(self) -> float | None:
         """The threshold of a persistence cut (None for another measure)."""
-        return self.threshold if self.measure == "persistence" else None
+        return None if get_measure(self.measure).pruned else self.threshold
 
     def of(self, hierarchy: MorseHierarchy, masked: bool | None = None) -> dict:
         """The keyword arguments of ``hierarchy.segment`` / ``region_of_maximum`` for
@@ -260,9 +260,9 @@ class CutRequest:
     def measures(self, masked: bool) -> tuple:
         """The cells' measures the cut reads: its own, and the sizes that
         `min_component` weighs the components by."""
-        needed = {self.measure} - {"persistence"}
+        needed = {self.measure} if get_measure(self.measure).pruned else set()
         if masked and self.min_component > 0:
-            needed.add("size")
+            needed.add(SIZE.name)
         return tuple(sorted(needed))
 
 
@@ -447,7 +447,7 @@ def _cut_fields(report: CutReport) -> dict:
     record = report.record
     threshold = record["cut_threshold"]
     return {"n_regions": report.n_regions, "cut": record, "report": report,
-            "min_persistence": threshold if record["measure"] == "persistence" else None,
+            "min_persistence": None if get_measure(record["measure"]).pruned else threshold,
             "measure": record["measure"], "threshold": threshold}
 
 
@@ -515,8 +515,6 @@ def segment_volume(
     measure: str | None = None,
     threshold: float | None = None,
     min_component: float | None = None,
-    smooth: float | None = None,
-    boundary: str | None = None,
     progress=None,
 ) -> Segmentation:
     """Segment a volume by the descending Morse complex of its mean curvature.
@@ -568,8 +566,6 @@ def segment_volume(
         With a mask: its connected components (in the Morse graph's connectivity)
         holding less than this share of the masked voxels are labelled 0 and take
         no region of `n_regions` (default `DEFAULT_MIN_COMPONENT`; 0 keeps all).
-    smooth, boundary
-        Deprecated names of `smooth_sigma` and `padding`.
     progress : callable, optional
         Called with a line as each stage starts (and the seconds the one before
         took). An exception it raises stops the run there: how a viewer cancels.
@@ -578,8 +574,6 @@ def segment_volume(
     -------
     Segmentation
     """
-    smooth_sigma = _validate.renamed(smooth_sigma, smooth, "smooth_sigma", "smooth", None)
-    padding = _validate.renamed(padding, boundary, "padding", "boundary", "linear")
     data = getattr(volume, "data", volume)
     lazy = _validate.is_lazy(data)
     data = _validate.lazy_volume_array(data) if lazy else _validate.volume_array(volume)
@@ -604,7 +598,6 @@ def segment_mesh(
     measure: str | None = None,
     threshold: float | None = None,
     min_component: float | None = None,
-    smooth: int | None = None,
 ) -> Segmentation:
     """Segment an oriented n-manifold in R^(n+1) by the descending Morse complex of its
     mean curvature on the mesh's vertex graph (its edges).
@@ -637,8 +630,6 @@ def segment_mesh(
         As in `segment_volume`; sizes are the vertices' volumes (a 1/(n+1) share
         of each simplex around them); `min_component` applies to the vertices
         segmented when some are left out (``boundary='nan'``).
-    smooth
-        Deprecated name of `smooth_rounds`.
 
     Returns
     -------
@@ -655,7 +646,6 @@ def segment_mesh(
     from . import mesh as _mesh
     from .curvature import vertex_curvature
 
-    smooth_rounds = _validate.renamed(smooth_rounds, smooth, "smooth_rounds", "smooth", 10)
     entry = get_operator(operator)
     if boundary not in ("partial", "nan"):
         raise ValueError(f"unknown `boundary` {boundary!r}; choose 'partial' or 'nan'")

@@ -132,7 +132,6 @@ def segment_series(
     min_persistence: float | None = None,
     boundary: str = "partial",
     smooth_rounds: int = 0,
-    smooth: int | None = None,
     memory_limit: int | None = None,
 ) -> SpaceTimeSegmentation:
     """Segment the space-time isosurface of a time-varying volume.
@@ -156,8 +155,6 @@ def segment_series(
         Passed to `isosurface`.
     operator, n_regions, min_persistence, boundary, smooth_rounds
         Passed to `segment_mesh`.
-    smooth
-        Deprecated name of `smooth_rounds`.
     memory_limit : int, optional
         Bytes the run may use: a level that cuts more grid cells than fit at
         `BYTES_PER_CUT_CELL` each is refused before the surface is made.
@@ -174,7 +171,6 @@ def segment_series(
     """
     from . import _validate
 
-    smooth_rounds = _validate.renamed(smooth_rounds, smooth, "smooth_rounds", "smooth", 0)
     data = _validate.volume_array(field, "field", ndim=4)
     spacing = _validate.spacing(spacing)
     time_scale = _validate.step(time_scale, "time_scale")

@@ -258,10 +258,23 @@ def test_small_mask_components_are_label_0_and_take_no_region():
 def test_bad_measures_and_mixed_thresholds_are_refused():
     h = descending_complex(np.random.default_rng(0).random((5, 5, 5)))
     with pytest.raises(ValueError, match="unknown `measure`"):
-        h.segment(n_regions=3, measure="area")
+        h.segment(n_regions=3, measure="mass")
     with pytest.raises(ValueError, match="give `threshold`"):
         h.segment(min_persistence=0.1, measure="size")
     with pytest.raises(ValueError, match="`threshold` must be a non-negative number"):
         h.segment(threshold=-1.0, measure="size")
     with pytest.raises(ValueError, match="not both"):
         h.segment(threshold=1.0, n_regions=2, measure="size")
+
+
+def test_higras_names_are_aliases_of_the_measures():
+    """dynamics, area and volume (higra's watershed hierarchies) name the height, size
+    and hypervolume entries: the same cut by either name."""
+    from volseg.morse import MEASURE_REGISTRY, get_measure
+
+    h = descending_complex(np.random.default_rng(0).random((6, 5, 4)))
+    for alias, name in (("dynamics", "persistence"), ("area", "size"), ("volume", "hypervolume"),
+                        ("Hyper-Volume", "hypervolume")):
+        assert get_measure(alias) is MEASURE_REGISTRY[name]
+        assert np.array_equal(h.segment(n_regions=4, measure=alias),
+                              h.segment(n_regions=4, measure=name))

@@ -202,11 +202,7 @@ def test_lift_puts_the_function_in_the_fourth_coordinate():
     np.testing.assert_allclose(lift(points, f)[:, 3], f(*points.T))
 
 
-def test_the_old_tetrahedron_angles_warn_and_equal_the_one_function():
-    from volseg.tessellation import irregular
-
+def test_the_meshes_minimum_dihedral_is_that_of_dihedral_angles():
     mesh = irregular_cube_mesh(200, seed=1)
-    with pytest.warns(DeprecationWarning, match="volseg.tessellation.dihedral_angles"):
-        old = irregular.dihedral_angles(mesh.points, mesh.tetrahedra)
-    assert np.allclose(old, dihedral_angles(mesh.points, mesh.tetrahedra), atol=1e-9)
-    assert np.array_equal(old.min(axis=1), mesh.min_dihedral)
+    angles = dihedral_angles(mesh.points, mesh.tetrahedra)
+    np.testing.assert_allclose(angles.min(axis=1), mesh.min_dihedral, atol=1e-9)

@@ -51,7 +51,6 @@ def grid_curvature(
     spacing=None,
     value_scale: float | None = None,
     padding: str = "linear",
-    boundary: str | None = None,
 ) -> NDArray[np.float64]:
     """Curvature of a volume's graph in R^4, on the implicit Kuhn tessellation.
 
@@ -75,8 +74,6 @@ def grid_curvature(
         continued linearly (``f[-1] = 2 f[0] - f[1]``: a plane stays flat up to the
         boundary, and the boundary adds no curvature across itself) or mirrored
         (``f[-1] = f[1]``: zero normal derivative, as for a symmetric field).
-    boundary
-        Deprecated name of `padding`.
 
     Returns
     -------
@@ -93,11 +90,6 @@ def grid_curvature(
     >>> round(float(h[16, 16, 16]), 2)  # the peak of -0.4|x|^2: H = +0.8
     0.8
     """
-    if boundary is not None:
-        import warnings
-
-        warnings.warn("`boundary` is deprecated: use `padding`", DeprecationWarning, stacklevel=2)
-        padding = boundary
     entry = get_operator(operator)
     check_padding(padding)
     h = _validate.spacing(spacing, getattr(volume, "spacing", (1.0, 1.0, 1.0)))

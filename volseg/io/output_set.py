@@ -2,7 +2,8 @@
 
 Guarantees, for a folder and a stem (``fuel`` -> ``fuel_labels.nii.gz``, ...):
 
-- **one writer at a time**: an advisory lock (``flock``) on ``.<stem>.volseg-lock``
+- **one writer at a time**: an OS lock (``flock`` on POSIX, ``msvcrt.locking`` on
+  Windows) on ``.<stem>.volseg-lock``
   in the folder, taken before anything is computed; a second process fails at once
   (or waits, with ``wait=True``). The lock file is removed on release;
 - **checked up front**: existing outputs are refused unless ``force``, and a target
@@ -18,7 +19,6 @@ Guarantees, for a folder and a stem (``fuel`` -> ``fuel_labels.nii.gz``, ...):
 from __future__ import annotations
 
 import errno
-import fcntl
 import json
 import os
 import re
@@ -77,10 +77,11 @@ class FolderLock:
                 raise OutputError(f"{self.path}: is not a regular file, not volseg's lock "
                                   "file; remove it")
             try:
-                fcntl.flock(fd, fcntl.LOCK_EX | (0 if self.wait else fcntl.LOCK_NB))
+                _lock_file(fd, self.wait)
             except OSError as err:
                 os.close(fd)
-                if err.errno not in (errno.EWOULDBLOCK, errno.EAGAIN):
+                if err.errno not in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES,
+                                     errno.EDEADLK):
                     raise
                 raise OutputError(f"{self.folder}: {self.busy}; wait for it to finish, "
                                   "or use --wait") from None
@@ -104,6 +105,27 @@ class FolderLock:
                 pass
             os.close(self._fd)
             self._fd = None
+
+
+def _lock_file(fd: int, wait: bool) -> None:
+    """Lock the open file `fd` for this process, waiting or not; OSError when another
+    holds it. POSIX ``flock``, else Windows' ``msvcrt.locking`` of its first byte;
+    imported here, so that `volseg.io` imports on every platform."""
+    try:
+        import fcntl
+    except ImportError:                                    # Windows
+        import msvcrt
+        import time
+
+        while True:
+            try:
+                msvcrt.locking(fd, msvcrt.LK_NBLCK, 1)
+                return
+            except OSError:
+                if not wait:
+                    raise
+                time.sleep(0.05)
+    fcntl.flock(fd, fcntl.LOCK_EX | (0 if wait else fcntl.LOCK_NB))
 
 
 def _staging_prefix(stem: str) -> str:

@@ -1,22 +1,24 @@
 """Descending Morse complex of a vertex field, simplified hierarchically by persistence.
 
 Stands alone: of volseg it imports only its own modules and the shared leaves
-(`volseg._kuhn`, the grid neighbourhood; `volseg._union_find`; `volseg._halo`,
-`volseg._atomic` and `volseg._block_hooks` for the blockwise build); otherwise numpy,
-scipy and numba, networkx only for graph input and `region_adjacency`, dask for Dask
-fields. The package:
+(`volseg._kuhn`, the grid neighbourhood; `volseg._union_find`; `volseg._registry`;
+`volseg.errors`); otherwise numpy, scipy and numba, networkx only for graph input and
+`region_adjacency`. It imports nothing of Dask: a Dask field is handed to the
+distributed build, `volseg.morse.blocks`, imported only then. The package:
 
 - `_graph`: grid connectivities, graph input as CSR, the checked field;
 - `_build`: the in-memory build (`descending_complex`), `_edges` and `_kernels` its
   cross-cell edges and compiled passes;
-- `_blocks` (with `_block_kernels`): the same build on a Dask array, block by block;
-  `_buckets` its hierarchy in buckets of maximum ids on the workers, `_bucket_cut` a
-  persistence cut there (no process holds every maximum);
-- `_hierarchy`: `MorseHierarchy`, every cut of it without recomputation;
-- `_measures` and `_prune`: the size measures of DESIGN.md section 12 (per-cell sizes
-  and hypervolumes, the Carr et al. pruning over the merge events).
+- `_hierarchy`: `MorseHierarchy`, every cut of it without recomputation; `cuts`: a
+  cut with the report the pipeline writes;
+- `_measures`: the cut measures, a registry (`MEASURE_REGISTRY`: persistence, size,
+  hypervolume; docs/design.md section 12), and each cell's size and hypervolume;
+  `_prune` and `_prune_groups` (with `_group_tree`, `_group_kernels`): the Carr et al.
+  pruning over the merge events, sequential or in a tree of groups;
+- `blocks/`: the same build on a Dask array, block by block, and its hierarchy kept in
+  buckets on the workers (`HierarchyOnWorkers`).
 
-DESIGN.md section 5 is the contract:
+docs/design.md section 5 is the contract:
 
 - order: simulation of simplicity, u is higher than v when (f(u), u) > (f(v), v),
   so every result is deterministic and plateaus need no special case;
@@ -51,12 +53,13 @@ from ._build import descending_complex
 from ._curve import CurveSample, curve_sample
 from ._graph import grid_offsets
 from ._hierarchy import MorseHierarchy, check_cut, check_measure_cut
-from ._measures import MEASURES
-from ._on_workers import HierarchyOnWorkers
+from ._measures import MEASURE_REGISTRY, MEASURES, PERSISTENCE, SIZE, Measure, get_measure
+from .cuts import CutReport, cut_of
 
 __all__ = ["descending_complex", "MorseHierarchy", "grid_offsets", "check_cut",
-           "check_measure_cut", "MEASURES", "CurveSample", "curve_sample",
-           "HierarchyOnWorkers", "entry_kernels"]
+           "check_measure_cut", "Measure", "MEASURE_REGISTRY", "MEASURES", "PERSISTENCE",
+           "SIZE", "get_measure", "CurveSample", "curve_sample", "CutReport", "cut_of",
+           "entry_kernels"]
 
 
 def entry_kernels() -> list:

@@ -121,7 +121,7 @@ def descending_complex(field: ArrayLike, *, adjacency=None, connectivity="kuhn",
         if adjacency is not None:
             raise ValueError("a Dask `field` is segmented on its grid; compute it (numpy) "
                              "to use `adjacency`")
-        from ._blocks import dask_hierarchy
+        from .blocks import dask_hierarchy  # the distributed build, on Dask input only
 
         hierarchy = dask_hierarchy(field, connectivity, mask=mask, hooks=block_hooks)
         return hierarchy if on_workers else hierarchy.fetch()

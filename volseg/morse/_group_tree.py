@@ -34,7 +34,7 @@ import numpy as np
 
 from .._distinct import distinct, is_in
 from .._sizes import SizedByArrays
-from . import _block_kernels as kernels
+from . import _group_kernels as kernels
 from . import _kernels
 from ._edges import _saddle_order
 

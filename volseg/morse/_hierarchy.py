@@ -12,9 +12,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._sizes import SizedByArrays
+from ..errors import VolsegWarning
 from . import _kernels, _measures, _prune, _prune_groups
 from ._graph import grid_offsets
-from ._measures import check_measure
+from ._measures import SIZE, get_measure
 
 __all__ = ["MorseHierarchy", "check_cut", "check_measure_cut"]
 
@@ -54,11 +55,11 @@ def check_measure_cut(min_persistence=None, n_regions=None, measure="persistence
     `min_persistence` is the persistence measure's `threshold` (give one of them);
     a size measure takes `threshold`. At most one of the threshold and `n_regions`.
     """
-    measure = check_measure(measure)
+    measure = get_measure(measure).name
     if min_persistence is not None:
         if threshold is not None:
             raise ValueError("give `threshold` or `min_persistence`, not both")
-        if measure != "persistence":
+        if get_measure(measure).pruned:
             raise ValueError(f"`min_persistence` is a threshold of persistence; with "
                              f"measure {measure!r} give `threshold`")
         threshold = min_persistence
@@ -101,6 +102,10 @@ class MorseHierarchy(SizedByArrays):
         What one vertex counts in the ``size`` and ``hypervolume`` measures: None
         for 1 (sizes in vertices), a voxel's volume for world units, a mesh's
         vertex volumes (`with_vertex_weight`).
+
+    A hierarchy fetched from the distributed build (`volseg.morse.blocks`) keeps its
+    cells lazy and carries the function that sums its cells' measures on the workers
+    (``_measure_cells``, default `_measures.cell_measures`).
     """
 
     shape: tuple
@@ -120,6 +125,7 @@ class MorseHierarchy(SizedByArrays):
     timings: dict = dataclass_field(default_factory=dict, repr=False)
     vertex_weight: object = None
     _pruned: dict = dataclass_field(default_factory=dict, repr=False)
+    _measure_cells: object = dataclass_field(default=None, repr=False)
 
     def with_vertex_weight(self, weight) -> MorseHierarchy:
         """The same hierarchy with sizes counted in `weight` per vertex (a positive
@@ -148,7 +154,7 @@ class MorseHierarchy(SizedByArrays):
         """(E,) the measure at which each event merges: its persistence, or the
         ``size`` / ``hypervolume`` of the region pruned across it (DESIGN.md section
         12; pruned once per measure, then every cut is a lookup)."""
-        if check_measure(measure) == "persistence":
+        if not get_measure(measure).pruned:
             return self.event_persistence
         return self._pruning(measure)[1]
 
@@ -163,7 +169,7 @@ class MorseHierarchy(SizedByArrays):
 
     def cell_measure(self, measure: str) -> NDArray[np.float64]:
         """(M,) the ``size`` or ``hypervolume`` of each maximum's own cell."""
-        if check_measure(measure) == "persistence":
+        if not get_measure(measure).pruned:
             raise ValueError("persistence belongs to the events (`extinction`), not to cells")
         return self._pruning(measure)[2]
 
@@ -173,7 +179,7 @@ class MorseHierarchy(SizedByArrays):
         with a mesh's vertex weights."""
         key = ("cells", measure)
         if key not in self._pruned:
-            self._pruned[key] = _measures.cell_measures(self, measure)
+            self._pruned[key] = (self._measure_cells or _measures.cell_measures)(self, measure)
         return self._pruned[key]
 
     def _cell_values(self, measure) -> NDArray[np.float64]:
@@ -265,7 +271,7 @@ class MorseHierarchy(SizedByArrays):
         component = self.component_of_maximum()
         # In vertices (exact integers) on a grid, as where a blockwise hierarchy's
         # buckets are (`_bucket_cut.small_components`); a mesh's weights otherwise.
-        base = self._cell_base("size")
+        base = self._cell_base(SIZE.name)
         sizes = np.bincount(component, weights=base.sums if isinstance(base, _measures.Fixed)
                             else base)
         return (sizes < min_share * sizes.sum())[component]
@@ -278,7 +284,7 @@ class MorseHierarchy(SizedByArrays):
         if n_regions is not None:
             components = self.n_components - len(np.unique(self.component_of_maximum()[dropped]))
             keep = events_kept(n_regions, len(self.maxima), components, stacklevel=4)
-        if measure == "persistence":
+        if not get_measure(measure).pruned:
             p = np.where(gone, -np.inf, self.event_persistence)
             if keep is not None:
                 return _all_but_most_persistent(p, self.young, keep)
@@ -305,7 +311,7 @@ class MorseHierarchy(SizedByArrays):
         # Persistence joins each young maximum to its target (as it always has: every
         # cell of its component at its death is a lower-persistence event, merged
         # too); a size measure joins the two ends of the saddle edge.
-        young = self.young if check_measure(measure) == "persistence" else self.source
+        young = self.source if get_measure(measure).pruned else self.young
         _kernels.regions_of_cut(young, self.target, merged, region)
         if dropped.any():
             kept = np.unique(region[~dropped])         # consecutive again, in order
@@ -448,11 +454,11 @@ def events_kept(n_regions: int, n_maxima: int, components: int, stacklevel: int 
     count cannot be met (more regions than maxima, fewer than components)."""
     if n_regions > n_maxima:
         warnings.warn(f"asked for {n_regions} regions but the field has only {n_maxima} "
-                      "maxima; returning all of them", stacklevel=stacklevel)
+                      "maxima; returning all of them", VolsegWarning, stacklevel=stacklevel)
     elif n_regions < components:
         warnings.warn(f"asked for {n_regions} regions but the graph has {components} "
                       "connected components; returning one region per component",
-                      stacklevel=stacklevel)
+                      VolsegWarning, stacklevel=stacklevel)
     return max(n_regions - components, 0)
 
 

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import MissingChunksError, VolsegError
+from ..errors import MissingChunksError, VolsegError, VolsegWarning
 from ..io.ngff import ome_levels
 from ..io.readers import is_tiff_folder
 from ..outputs import BLOCKWISE_SUFFIXES, NGFF_SUFFIX, OUTPUT_SUFFIXES
@@ -79,7 +79,7 @@ def _load(path: Path, **options):
                                      fill_missing_chunks=True)
             warnings.warn(f"{err}: read them as the fill value, as every Zarr reader does "
                           "(volseg segment needs --fill-missing-chunks for this store)",
-                          UserWarning, stacklevel=2)
+                          VolsegWarning, stacklevel=2)
             return volume
     except VolsegError as err:
         raise ValueError(str(err)) from None     # napari shows a reader's error as one line

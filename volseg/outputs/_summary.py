@@ -14,8 +14,9 @@ from pathlib import Path
 import numpy as np
 
 from .._version import __version__
-from ..cuts import LISTED_PERSISTENCES
 from ..io import Frame
+from ..morse import get_measure
+from ..morse.cuts import LISTED_PERSISTENCES
 
 __all__ = ["OUTPUT_SUFFIXES", "BLOCKWISE_NIFTI_VOXELS", "PARAVIEW_SUFFIX", "PARAVIEW_VOXELS",
            "NGFF_SUFFIX", "output_names", "files_sha256", "summary",
@@ -180,7 +181,7 @@ def degenerate_cut_warning(name: str, result, spread: dict, dtype) -> str | None
     what = (f"{name}: the largest of {result.n_regions} regions holds "
             f"{100 * spread['largest_share']:.1f} % of the labelled voxels and only "
             f"{spread['regions_at_least_1_percent']} hold 1 % or more")
-    if result.measure == "persistence":
+    if not get_measure(result.measure).pruned:
         fix = ("the most persistent curvature peaks are voxel-sized spikes; try --measure "
                "hypervolume (or size)" + (", --smooth 1" if result.smooth_sigma == 0 else ""))
     elif result.smooth_sigma == 0 and np.dtype(dtype).kind in "biu":

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..morse import CurveSample, curve_sample
+from ..morse import CurveSample, curve_sample, get_measure
 
 __all__ = ["write_preview", "write_persistence_plot", "persistence_panel", "TAB20", "gray",
            "diverging", "overlay"]
@@ -103,7 +103,7 @@ def persistence_panel(persistence, n_components, threshold, n_regions, *, width=
     draw = ImageDraw.Draw(canvas)
     small, medium = _font(11), _font(13)
     left, right, top, bottom = 62, 18, 24, 40
-    option = "--min-persistence" if measure == "persistence" else "--threshold"
+    option = get_measure(measure).option
     draw.text((width // 2, 4), f"{measure} curve: regions of the cut at each threshold "
               f"(choose {option} in a long flat step)", fill=_INK, font=medium, anchor="ma")
     if len(p) == 0:

@@ -63,16 +63,6 @@ def lift(points: NDArray, function) -> NDArray[np.float64]:
     return np.column_stack([points, values])
 
 
-def dihedral_angles(points: NDArray, tetrahedra: NDArray) -> NDArray[np.float64]:
-    """Deprecated: `volseg.tessellation.dihedral_angles` (any simplicial mesh in any
-    R^d). (T, 6) dihedral angles in degrees of tetrahedra in R^3."""
-    import warnings
-
-    warnings.warn("volseg.tessellation.irregular.dihedral_angles is deprecated: use "
-                  "volseg.tessellation.dihedral_angles", DeprecationWarning, stacklevel=2)
-    return _tetrahedron_angles(points, tetrahedra)
-
-
 def _dart_throw(rng, n, radius, existing, sampler, max_rounds=100):
     """Up to `n` points from `sampler(k)`, each at least `radius` from the others and
     from `existing`: batches of candidates, conflicts resolved greedily in order."""

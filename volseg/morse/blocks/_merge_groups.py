@@ -25,9 +25,9 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from .._distinct import distinct
-from .._union_find import find_root
-from ._prune_groups import GroupState
+from ..._distinct import distinct
+from ..._union_find import find_root
+from .._prune_groups import GroupState
 
 __all__ = []
 

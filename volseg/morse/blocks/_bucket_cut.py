@@ -27,12 +27,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._distinct import distinct
-from .._sizes import SizedByArrays
-from .._task_graph import TaskGraph
+from ..._distinct import distinct
+from ..._sizes import SizedByArrays
+from ..._task_graph import TaskGraph
+from .._hierarchy import events_kept, midpoint_threshold, widest_gap_count
 from . import _ranks
 from ._buckets import Bucket, batches, by_bucket, first_ids
-from ._hierarchy import events_kept, midpoint_threshold, widest_gap_count
 
 __all__ = []
 

@@ -12,10 +12,12 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from volseg import descending_complex
-from volseg.morse import _blocks, _group_tree, _ranks
+from volseg.morse import _group_tree
+from volseg.morse.blocks import _build as _blocks
+from volseg.morse.blocks import _ranks
 
-from ..conftest import smooth_random_field
-from .test_blockwise import assert_same_hierarchy
+from ...conftest import smooth_random_field
+from ...blockwise.test_blockwise import assert_same_hierarchy
 
 
 @pytest.fixture(autouse=True)
@@ -147,7 +149,7 @@ def test_the_client_holds_no_outer_layer(monkeypatch):
 def test_the_ascent_gives_the_range_a_hypervolume_cut_reads(chunks):
     # The field's range in the mask comes from the ascent's blocks (no pass of its
     # own): the extremes outside the mask, and blocks with no voxel in it, count not.
-    from volseg.cuts import cut_of
+    from volseg.morse import cut_of
     from volseg.segment import CutRequest
 
     rng = np.random.default_rng(4)
@@ -170,7 +172,7 @@ def test_a_cut_on_the_workers_sends_the_client_nothing_per_maximum(measure):
     # The pipeline's path (issue 30): the hierarchy kept where it was assembled, cut
     # there; the client receives counts, the regions' tops and a thinned curve, and
     # no array as long as the maxima. The labels are those of the cut in memory.
-    from volseg.cuts import cut_of
+    from volseg.morse import cut_of
     from volseg.segment import CutRequest
 
 

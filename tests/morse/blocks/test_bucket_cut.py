@@ -10,11 +10,12 @@ import numpy as np
 import pytest
 
 from volseg import descending_complex
-from volseg.cuts import cut_of, in_buckets
-from volseg.morse import _bucket_cut, _bucket_prune, _buckets, _kernels
+from volseg.morse import _kernels, cut_of
+from volseg.morse.blocks import _bucket_cut, _bucket_prune, _buckets
+from volseg.morse.blocks._cut import in_buckets
 from volseg.segment import CutRequest
 
-from ..conftest import smooth_random_field
+from ...conftest import smooth_random_field
 from .test_block_groups import _arrays, recording
 
 CUTS = [dict(n_regions="auto"), dict(n_regions=5), dict(n_regions=1),
@@ -293,7 +294,7 @@ def test_no_bucket_holds_most_of_the_maxima(never_joined):
 
 
 def test_buckets_grow_past_2048_cubed_so_each_stays_small():
-    from volseg.morse import _blocks
+    from volseg.morse.blocks import _build as _blocks
 
     assert _blocks._bucket_count(5, 10**6) == 5                 # never more than blocks
     assert _blocks._bucket_count(512, 1024**3) == 32
@@ -340,7 +341,7 @@ def test_a_thinned_curve_is_sampled_at_the_same_ranks(never_joined):
 def test_each_blocks_cells_from_its_table_are_those_of_its_voxels(chunks, masked):
     # The cut's passes route by each block's distinct cells, found from the cells
     # pass's tables (`_block_cells.table_cells`), not by reading the cells again.
-    from volseg.morse._block_cells import block_cells
+    from volseg.morse.blocks._cells import block_cells
 
     field = np.round(smooth_random_field((14, 12, 10), np.random.default_rng(3), sigma=0.5)
                      * 20)                                   # plateaus

@@ -21,10 +21,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._sizes import SizedByArrays
-from .._task_graph import TaskGraph
-from . import _group_tree
-from ._hierarchy import MorseHierarchy
+from ..._sizes import SizedByArrays
+from ..._task_graph import TaskGraph
+from .. import _group_tree
+from .._hierarchy import MorseHierarchy
+from .._measures import PERSISTENCE
 
 __all__ = []
 
@@ -63,7 +64,7 @@ class Bucket(SizedByArrays):
 
     # How a persistence cut merges the maxima (`_bucket_cut.head_of`): each one that
     # dies into its target, ordered by its persistence, ties the lower id kept first.
-    measure = "persistence"
+    measure = PERSISTENCE.name
 
     def extinction(self) -> np.ndarray:
         return self.persistence()

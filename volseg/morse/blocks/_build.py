@@ -43,19 +43,20 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import _atomic
-from .._block_hooks import BlockHooks
-from .._distinct import index_type, places
-from .._halo import block_starts, with_halo, with_halos
-from .._task_graph import TaskGraph, _one_object
-from . import _block_kernels as kernels
-from . import _buckets, _exits, _group_tree, _measures, _ranks
-from ._block_cells import table_cells
-from ._block_objects import only, per_block
-from ._edges import _cross_edges, spanning_forest
-from ._graph import _Neighbourhood, grid_offsets
+from ... import _atomic
+from ..._block_hooks import BlockHooks
+from ..._distinct import index_type, places
+from ..._halo import block_starts, with_halo, with_halos
+from ..._task_graph import TaskGraph, _one_object
+from .. import _group_tree, _measures
+from .._edges import _cross_edges, spanning_forest
+from .._graph import _Neighbourhood, grid_offsets
+from .._phases import _Phases
+from . import _buckets, _exits, _ranks
+from . import _kernels as kernels
+from ._cells import table_cells
+from ._objects import only, per_block
 from ._on_workers import HierarchyOnWorkers
-from ._phases import _Phases
 
 __all__ = ["dask_descending_complex", "dask_hierarchy"]
 

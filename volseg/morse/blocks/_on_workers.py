@@ -21,14 +21,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._block_hooks import BlockHooks
+from ..._block_hooks import BlockHooks
+from .. import _measures
+from .._curve import CurveSample, sample_ranks
+from .._hierarchy import MorseHierarchy, checked_weight, region_table
 from . import _bucket_cut as in_buckets
 from . import _bucket_prune as pruning
-from . import _measures
-from ._block_cells import block_counts, gathered, looked_up
-from ._curve import CurveSample, sample_ranks
-from ._hierarchy import MorseHierarchy, checked_weight, region_table
-from ._measures import lazy_cell_measures
+from ._cells import block_counts, gathered, looked_up
+from ._measures import cell_measures_of_dask, computed_range, lazy_cell_measures
 
 __all__ = ["HierarchyOnWorkers"]
 
@@ -77,7 +77,8 @@ class HierarchyOnWorkers:
             self._fetched = dataclasses.replace(
                 core, cells=self.cells, mask=self.mask, _field=self._field,
                 _connectivity=self._connectivity, timings=self.timings,
-                vertex_weight=self.vertex_weight, _pruned={})
+                vertex_weight=self.vertex_weight, _pruned={},
+                _measure_cells=cell_measures_of_dask)
         return self._fetched
 
     def __getattr__(self, name):
@@ -96,6 +97,13 @@ class HierarchyOnWorkers:
             self._joined, = self.hooks.persist(self.core, stage="Morse: the events joined in "
                                                "sweep order", hierarchy=True)
         return self._joined
+
+    def cut_of(self, cut) -> tuple:
+        """(lazy labels 1..k, `volseg.morse.cuts.CutReport`) of `cut`, made where the
+        hierarchy is kept (`_cut.cut_of`)."""
+        from . import _cut
+
+        return _cut.cut_of(self, cut)
 
     def run(self, function, *args, measures=()) -> tuple:
         """(lazy labels, result) of ``function(hierarchy, masked, *args) -> (region,
@@ -155,11 +163,11 @@ class HierarchyOnWorkers:
         if measure not in self._merges:
             persist = self.hooks.persist
             ids = self._block_cells()
-            if measure == "size":
+            if not _measures.get_measure(measure).by_height:
                 unit, totals = 1.0, self._bucket_sizes()
             else:
                 low, high = self._field_range()
-                unit = _measures._unit(low, high)
+                unit = _measures.unit_of(low, high)
                 saddles, = persist(pruning.cell_saddles(self.buckets, self.firsts, ids, low),
                                    stage="Morse: each block's cells' saddles, from the buckets")
                 sums, = persist(pruning.block_hypervolumes(self.cells, self._field, ids,
@@ -178,7 +186,7 @@ class HierarchyOnWorkers:
         """The field's (min, max) over the cells, as the ascent found it or computed."""
         if self.field_range is not None:
             return self.field_range
-        return _measures.computed_range(
+        return computed_range(
             self.cells, self._field.rechunk(self.cells.chunks),
             lambda d: self.hooks.compute(d, stage="Morse: the field's range")[0])
 

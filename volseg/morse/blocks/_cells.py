@@ -22,9 +22,9 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from .._distinct import distinct
-from . import _prune
-from ._block_objects import per_block
+from ..._distinct import distinct
+from .. import _prune
+from ._objects import per_block
 
 __all__ = []
 

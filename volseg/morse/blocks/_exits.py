@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._distinct import distinct
+from ..._distinct import distinct
 
 __all__ = []
 

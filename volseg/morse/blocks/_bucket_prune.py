@@ -37,15 +37,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._distinct import distinct
-from .._sizes import SizedByArrays
-from .._task_graph import TaskGraph
-from . import _measures, _merge_groups, _prune_groups
-from ._block_objects import per_block
+from ..._distinct import distinct
+from ..._sizes import SizedByArrays
+from ..._task_graph import TaskGraph
+from .. import _measures, _prune_groups
+from .._edges import _saddle_order
+from .._group_tree import block_tree
+from . import _merge_groups
 from ._bucket_cut import block_labels
 from ._buckets import batches, by_bucket
-from ._edges import _saddle_order
-from ._group_tree import block_tree
+from ._measures import _block_hypervolumes
+from ._objects import per_block
 
 __all__ = []
 
@@ -114,7 +116,7 @@ def cell_saddles(buckets: list, firsts, ids, low: float):
 
 def block_hypervolumes(cells, field, ids, saddles, unit: float):
     """Lazy: each block's int64 hypervolume sums, aligned with its `ids`."""
-    return per_block(_measures._block_hypervolumes, cells, field.rechunk(cells.chunks), ids,
+    return per_block(_block_hypervolumes, cells, field.rechunk(cells.chunks), ids,
                      saddles, unit=unit)
 
 
