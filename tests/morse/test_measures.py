@@ -274,7 +274,7 @@ def test_higras_names_are_aliases_of_the_measures():
 
     h = descending_complex(np.random.default_rng(0).random((6, 5, 4)))
     for alias, name in (("dynamics", "persistence"), ("area", "size"), ("volume", "hypervolume"),
-                        ("Hyper-Volume", "hypervolume")):
+                        ("HyperVolume", "hypervolume")):
         assert get_measure(alias) is MEASURE_REGISTRY[name]
         assert np.array_equal(h.segment(n_regions=4, measure=alias),
                               h.segment(n_regions=4, measure=name))
