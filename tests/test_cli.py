@@ -251,3 +251,24 @@ def test_first_run_note_and_in_memory_stage_progress(tmp_path, capsys, monkeypat
     assert "compiling" not in capsys.readouterr().err
     assert main(["segment", str(source), "-o", str(tmp_path / "c"), "-q"]) == 0
     assert capsys.readouterr().err == ""
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--mask", "brightest"], "unknown --mask rule 'brightest'"),
+    (["--chunks", "1"], "--chunks must be a whole number of at least 2 voxels, got 1"),
+    (["--smooth", "-1"], "--smooth must be a non-negative number of voxels"),
+    (["--regions", "0"], "--regions must be at least 1, got 0"),
+])
+def test_a_bad_option_is_refused_before_the_input_is_opened(tmp_path, capsys, monkeypatch, argv,
+                                                             message):
+    """`SegmentRequest.checked` is the one check of every option; the command line runs it
+    before it opens anything: no input is read and nothing is written."""
+    import volseg.files
+
+    opened = []
+    monkeypatch.setattr(volseg.files, "load_for_budget", lambda *a, **k: opened.append(a))
+    out = tmp_path / "o"
+    assert main(["segment", str(tmp_path / "missing.nii.gz"), "-o", str(out), *argv]) == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1, err
+    assert opened == [] and not out.exists()

@@ -128,15 +128,13 @@ def test_a_second_writer_fails_at_once_or_waits(tmp_path, capsys, monkeypatch):
     names = {k: f"w_{k}" for k in ("labels.nii.gz",)}
     import fcntl
 
-    import volseg.io.output_set as output_set
-
     calls, flock = [], fcntl.flock
 
     def recorded(fd, operation):
         calls.append(operation)
         return flock(fd, operation)
 
-    monkeypatch.setattr(output_set.fcntl, "flock", recorded)
+    monkeypatch.setattr(fcntl, "flock", recorded)       # the lock imports it when taken
     with OutputSet(out, "w", names):
         calls.clear()
         assert main(["segment", str(source), "-o", str(out), "-q"]) == 2

@@ -3,6 +3,8 @@ with the argument named in every message (STYLE.md section 4)."""
 
 from __future__ import annotations
 
+import numbers
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -98,6 +100,14 @@ def number(value, name: str, *, positive: bool = False) -> float:
     if not np.isfinite(result) or (positive and result <= 0):
         raise ValueError(f"`{name}` must be {kind}, got {value!r}")
     return result
+
+
+def chunk_edge(value, name: str = "chunks") -> int:
+    """A blockwise chunk's edge in voxels: a whole number of at least 2 (a block of
+    one voxel has no interior for the halo stencils)."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < 2:
+        raise ValueError(f"`{name}` must be a whole number of at least 2 voxels, got {value!r}")
+    return int(value)
 
 
 def share(value, name: str) -> float:

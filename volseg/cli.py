@@ -19,7 +19,7 @@ from ._version import __version__
 from .blockwise.engine import MEMORY_SHARE, default_memory_limit, parse_bytes
 from .curvature import cli_choices, normalize_operator
 from .errors import UsageError
-from .morse import MEASURES, get_measure
+from .morse import MEASURES
 from .segment import (
     AUTO_INTEGER_SIGMA,
     AUTO_REGION_RANGE,
@@ -246,63 +246,57 @@ def _progress(quiet):
     return say
 
 
-def _check_mask_rule(rule):
-    from .masks import check_rule
+#: The library's keyword -> this command line's option, for the library's messages.
+_OPTIONS = {"n_regions": "--regions", "min_persistence": "--min-persistence",
+            "threshold": "--threshold", "measure": "--measure", "min_component": "--min-component",
+            "smooth_sigma": "--smooth", "mask": "--mask", "chunks": "--chunks",
+            "operator": "--operator", "value_scale": "--value-scale", "smooth_rounds": "--smooth"}
+
+
+def _checked_request(**options):
+    """`volseg.segment.SegmentRequest.checked` of the options, before any input is read:
+    its error becomes a `UsageError` that names our options (``--regions``, not
+    ``n_regions``)."""
+    from .segment import SegmentRequest
 
     try:
-        check_rule(rule)
+        return SegmentRequest.checked(**options)
     except ValueError as err:
-        raise UsageError(f"--mask: {err}") from None
+        message = str(err)
+        for keyword, option in _OPTIONS.items():
+            message = message.replace(f"`{keyword}`", option)
+        raise UsageError(message) from None
 
 
-def _check_cut_options(args):
-    if isinstance(args.regions, int) and args.regions < 1:
-        raise UsageError(f"--regions must be at least 1, got {args.regions}")
-    if args.min_persistence is not None and not args.min_persistence >= 0:
-        raise UsageError("--min-persistence must be a non-negative number, got "
-                         f"{args.min_persistence}")
-    threshold = getattr(args, "threshold", None)
-    if threshold is not None and not threshold >= 0:
-        raise UsageError(f"--threshold must be a non-negative number, got {threshold}")
-    measure = getattr(args, "measure", None)
-    if args.min_persistence is not None and measure is not None \
-            and get_measure(measure).pruned:
-        raise UsageError(f"--min-persistence is a threshold of persistence; with --measure "
-                         f"{measure} give --threshold")
-    share = getattr(args, "min_component", None)
-    if share is not None and not 0 <= share < 1:
-        raise UsageError(f"--min-component must be a share in [0, 1), got {share}")
+def _cut_options(args) -> dict:
+    """The cut's options of `segment` and `isosurface`, as the library names them."""
+    return {"n_regions": args.regions, "min_persistence": args.min_persistence,
+            **{name: getattr(args, name, None) for name in ("measure", "threshold",
+                                                            "min_component")}}
 
 
 def _cmd_segment(args):
     from .blockwise.engine import Engine
-    from .files import chunked, load_for_budget, segment_files
+    from .files import load_for_budget, segment_files
 
     say = _progress(args.quiet)
     out_dir = Path(args.out_dir)
-    _check_cut_options(args)
+    mask = args.mask if args.mask_threshold is None else f"value>{args.mask_threshold!r}"
+    request = _checked_request(**_cut_options(args), operator=args.operator, mask=mask,
+                               smooth_sigma=args.smooth_sigma, value_scale=args.value_scale,
+                               chunks=args.chunks)
     engine = Engine(args.scheduler, workers=args.workers, memory_limit=args.memory_limit,
                     hierarchy_memory=args.hierarchy_memory,
                     threads_per_worker=args.threads_per_worker,
                     progress=not args.quiet and sys.stderr.isatty())   # arguments checked here
     engine.check()
     # Read and check every input before writing or computing anything.
-    if args.chunks is not None and args.chunks < 2:
-        raise UsageError(f"--chunks must be at least 2 voxels, got {args.chunks}")
-    if args.smooth_sigma is not None and not (np.isfinite(args.smooth_sigma)
-                                              and args.smooth_sigma >= 0):
-        raise UsageError(f"--smooth must be a non-negative number of voxels, got "
-                         f"{args.smooth_sigma}")
-    mask = args.mask if args.mask_threshold is None else f"value>{args.mask_threshold!r}"
-    _check_mask_rule(mask)
     volumes = [load_for_budget(name, engine.memory_limit, shape=args.shape, dtype=args.dtype,
                                allow_external_data=args.allow_external_data,
                                fill_missing_chunks=args.fill_missing_chunks,
-                               chunks=args.chunks, channel=args.channel,
+                               chunks=request.chunks, channel=args.channel,
                                ome_level=args.ome_level, say=say)
                for name in args.inputs]
-    if args.chunks is not None:
-        volumes = [chunked(v, args.chunks) for v in volumes]
     summaries = segment_files(
         volumes, out_dir, force=args.force, wait=args.wait,
         persistence_plot=args.plot_persistence, paraview=args.vti, engine=engine, say=say,
@@ -322,7 +316,7 @@ def _cmd_isosurface(args):
 
     say = _progress(args.quiet)
     out_dir = Path(args.out_dir)
-    _check_cut_options(args)
+    _checked_request(**_cut_options(args), operator=args.operator)
     if not (np.isfinite(args.level)):
         raise UsageError(f"--level must be a finite number, got {args.level}")
     _validate.step(args.time_scale, "--time-scale")

@@ -78,7 +78,7 @@ def load_for_budget(name, budget: int, *, shape=None, dtype=None, allow_external
                "channel": channel, "ome_level": ome_level,
                "fill_missing_chunks": fill_missing_chunks}
     if chunks is not None:
-        return load_volume(name, **options, chunks=chunks)
+        return chunked(load_volume(name, **options, chunks=chunks), chunks)
     path = resolve(name)       # a dataset name is verified once, here
     _refuse_compressed_over_budget(path, budget)
     try:
@@ -116,12 +116,11 @@ def _refuse_compressed_over_budget(path, budget: int) -> None:
 
 
 def chunked(volume, size: int):
-    """A lazily read `volume` with its data in `size`^3 chunks (clipped to the shape:
-    a Zarr store's own chunks are rechunked)."""
+    """A lazily read `volume` with its data in `size`^3 chunks (`size` checked by
+    `volseg.segment.SegmentRequest`): the one place chunks are applied, a Zarr store's
+    own chunks rechunked too."""
     from .io import Volume
 
-    if size < 2:
-        raise UsageError(f"--chunks must be at least 2 voxels, got {size}")
     if any(size > n for n in volume.shape):
         raise UsageError(f"--chunks {size} is larger than the volume {volume.path or volume.name} "
                          f"along an axis (shape {volume.shape}); use at most {min(volume.shape)}")

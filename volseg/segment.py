@@ -29,7 +29,7 @@ from .curvature import (
     default_value_scale,
     get_operator,
 )
-from .masks import MaskChoice, foreground_mask
+from .masks import MaskChoice, check_rule, foreground_mask
 from .morse import (
     PERSISTENCE,
     SIZE,
@@ -268,10 +268,14 @@ class CutRequest:
 
 @dataclass(frozen=True)
 class SegmentRequest:
-    """What a segmentation of a volume is asked to do, checked once (`checked`).
+    """What a segmentation of a volume is asked to do, checked once (`checked`), before
+    any input is read: the one place every segmentation option is checked (the command
+    line maps its errors to its option names and checks nothing itself).
 
-    `mask` is a `foreground_mask` rule or array; `value_scale` None for the default
-    of the values after smoothing.
+    `mask` is a checked `foreground_mask` rule or an array (its shape is checked
+    against the volume's when the mask is made); `value_scale` None for the default of
+    the values after smoothing; `chunks` the blockwise path's chunk edge in voxels, or
+    None for the path the input's size chooses.
     """
 
     operator: Operator
@@ -283,21 +287,26 @@ class SegmentRequest:
     smooth_sigma: float | None
     smooth_rule: str = "given"
     dtype: np.dtype | None = None
+    chunks: int | None = None
 
     @classmethod
     def checked(cls, *, operator="weighted", min_persistence=None, n_regions=None,
                 value_scale=None, spacing=None, default_spacing=(1.0, 1.0, 1.0),
                 padding="linear", mask=None, smooth_sigma=0.0, measure=None,
-                threshold=None, min_component=None, dtype=None) -> SegmentRequest:
+                threshold=None, min_component=None, dtype=None,
+                chunks=None) -> SegmentRequest:
         cut = CutRequest.checked(
             min_persistence, n_regions, threshold=threshold, measure=measure,
             min_component=DEFAULT_MIN_COMPONENT if min_component is None else min_component)
         sigma = None if smooth_sigma is None else _validate.smooth(smooth_sigma)
+        if isinstance(mask, str):
+            check_rule(mask)
         return cls(get_operator(operator), cut,
                    None if value_scale is None else _validate.value_scale(value_scale),
                    _validate.spacing(spacing, default_spacing), check_padding(padding), mask,
                    sigma, "given" if sigma is not None else "auto",
-                   None if dtype is None else np.dtype(dtype))
+                   None if dtype is None else np.dtype(dtype),
+                   None if chunks is None else _validate.chunk_edge(chunks))
 
     def with_smoothing(self, data, mask) -> SegmentRequest:
         """The request with its smoothing resolved: `auto_smoothing` of `data` inside

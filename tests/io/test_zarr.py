@@ -148,9 +148,9 @@ def test_cli_blockwise_smoothing_equals_in_memory(tmp_path, volume, source):
 
 
 @pytest.mark.parametrize("extra, message", [
-    (["--chunks", "0"], "--chunks must be at least 2"),
+    (["--chunks", "0"], "--chunks must be a whole number of at least 2"),
     (["--chunks", "99"], "larger than the volume"),
-    (["--chunks", "8", "--mask", "bright"], "unknown `mask` rule 'bright'"),
+    (["--chunks", "8", "--mask", "bright"], "unknown --mask rule 'bright'"),
     (["--chunks", "8", "--mask-threshold", "1000", "-q"], "selects no voxel"),
     (["--chunks", "8", "--noise", "1"], "needs the volume in memory"),
     (["--chunks", "8", "--smooth", "-1"], "--smooth"),
