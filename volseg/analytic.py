@@ -30,6 +30,7 @@ class TestFunction:
     hessian: Callable  # -> (..., 3, 3)
 
     def __call__(self, x, y, z):
+        """The function's values at the points (x, y, z)."""
         return self.value(x, y, z)
 
     def mean_curvature(self, x, y, z) -> NDArray[np.float64]:

@@ -470,6 +470,7 @@ def _raise_interrupt(signum, frame):
 
 
 def main(argv=None) -> int:
+    """Run the command line on `argv` (default ``sys.argv[1:]``); returns the exit code."""
     parser = _get_parser()
     try:
         args = parser.parse_args(argv)
@@ -501,7 +502,7 @@ def main(argv=None) -> int:
 
 @contextmanager
 def _quiet_readers():
-    """nibabel's and Zarr's warnings and log lines (header fix-ups, metadata they do
+    """Nibabel's and Zarr's warnings and log lines (header fix-ups, metadata they do
     not recognise) off the terminal: what volseg refuses it says in its own one line,
     and what it accepts needs no second."""
     import logging

@@ -29,6 +29,8 @@ BASE_URL = "https://klacansky.com/open-scivis-datasets"
 
 @dataclass(frozen=True)
 class Dataset:
+    """A public dataset: its name, grid, type, size and SHA-256."""
+
     name: str
     shape: tuple
     dtype: str
@@ -37,11 +39,13 @@ class Dataset:
 
     @property
     def filename(self) -> str:
+        """The file name, as the Volvis archive names it."""
         x, y, z = self.shape
         return f"{self.name}_{x}x{y}x{z}_{self.dtype}.raw"
 
     @property
     def url(self) -> str:
+        """Where the dataset is downloaded from."""
         return f"{BASE_URL}/{self.name}/{self.filename}"
 
 

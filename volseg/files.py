@@ -314,8 +314,10 @@ def _labels_into_input(volume, outputs, name, level, say) -> None:
 
 def result_to_files(volume, result, out_dir, *, force=False, wait=False,
                     persistence_plot=False, paraview=None, say=_quiet) -> dict:
-    """Write a `Segmentation` of `volume` already made (by `segment_volume`, or cut
-    again with `Segmentation.recut`) as its output set in `out_dir`: the files, checks
+    """Write a `Segmentation` of `volume` already made as its output set in `out_dir`.
+
+    The result comes from `segment_volume`, or is cut again with `Segmentation.recut`;
+    written are the files, checks
     and summary `volseg segment` writes for the same cut, nothing recomputed. Returns
     the summary. (The napari plugin's "write outputs".)"""
     out_dir = check_out_dir(out_dir)

@@ -80,6 +80,7 @@ class MaskChoice:
     voxels: int
 
     def describe(self) -> dict:
+        """The choice as the summary records it."""
         return {"rule": self.rule, "used": self.used, "voxels": self.voxels}
 
     def phrase(self) -> str:

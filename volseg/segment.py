@@ -295,6 +295,7 @@ class SegmentRequest:
                 padding="linear", mask=None, smooth_sigma=0.0, measure=None,
                 threshold=None, min_component=None, dtype=None,
                 chunks=None) -> SegmentRequest:
+        """The request with every option checked; a ValueError names the option."""
         cut = CutRequest.checked(
             min_persistence, n_regions, threshold=threshold, measure=measure,
             min_component=DEFAULT_MIN_COMPONENT if min_component is None else min_component)
@@ -352,12 +353,15 @@ class Storage:
         """Called once the mask and the smoothing are resolved, before any stage runs."""
 
     def smoothed(self, values):
+        """The values after smoothing, as this storage keeps them."""
         return values
 
     def curvature(self, curvature):
+        """The curvature field, as this storage keeps it."""
         return curvature
 
     def labels(self, labels, n_regions: int):
+        """The labels of a cut into `n_regions`, as this storage keeps them."""
         return labels
 
     def finish(self) -> None:
@@ -375,6 +379,7 @@ class InMemory(Storage):
         self._say, self._started, self._stage = say, None, None
 
     def stage(self, name: str) -> None:
+        """Say that stage `name` starts (and how long the one before took)."""
         if self._say is None:
             return
         now = time.perf_counter()

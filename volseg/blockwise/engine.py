@@ -92,7 +92,7 @@ def _one_numba_thread():
 
 
 def physical_memory() -> int:
-    """This machine's physical memory, in bytes."""
+    """The physical memory of this machine, in bytes."""
     return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
 
 
@@ -184,6 +184,7 @@ class Engine:
 
     @property
     def threaded(self) -> bool:
+        """Whether blocks run on threads of this process (no scheduler)."""
         return self.scheduler in (None, "threads")
 
     @property
@@ -195,6 +196,7 @@ class Engine:
         return self.workers * self.threads_per_worker if self.scheduler == "local" else None
 
     def describe(self) -> str:
+        """One line naming the engine and its limits, for progress and summaries."""
         if self.threaded:
             return f"Dask threads ({self.workers})"
         if self.scheduler == "local":
@@ -425,7 +427,7 @@ class Engine:
 
 
 def _peak_rss() -> int:
-    """This process's peak resident memory so far, in bytes (Linux counts KiB)."""
+    """The peak resident memory of this process so far, in bytes (Linux counts KiB)."""
     import resource
 
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss

@@ -53,6 +53,7 @@ class FolderLock:
 
     @property
     def held(self) -> bool:
+        """Whether this process holds the lock."""
         return self._fd is not None
 
     def __enter__(self) -> FolderLock:
@@ -63,6 +64,7 @@ class FolderLock:
         self.release()
 
     def acquire(self):
+        """Take the lock, waiting if `wait`, else an `OutputError` when it is held."""
         while self._fd is None:
             try:      # never through a planted link, never anything but a regular file
                 fd = os.open(self.path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o644)
@@ -97,6 +99,7 @@ class FolderLock:
                 os.close(fd)
 
     def release(self):
+        """Let the lock go and remove its file (only the one this process holds)."""
         if self._fd is not None:
             try:          # only the file this process holds (not one planted since)
                 if os.path.samestat(os.fstat(self._fd), os.lstat(self.path)):

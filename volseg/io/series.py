@@ -58,6 +58,7 @@ class Series:
 
     @property
     def shape(self) -> tuple:
+        """The series' (X, Y, Z, T) shape."""
         return self.data.shape
 
 

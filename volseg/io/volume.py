@@ -87,7 +87,7 @@ class Frame:
         return cls(np.diag([*(float(s) for s in spacing), 1.0]), unit=unit)
 
     def with_unit(self, unit: str | None) -> Frame:
-        """This frame with the world's length `unit`."""
+        """The same frame with the world's length `unit`."""
         return Frame(self.affine, self.sform_code, self.qform_code, self.qform, unit)
 
     @property
@@ -141,18 +141,22 @@ class Volume:
 
     @property
     def spacing(self) -> tuple:
+        """The voxel sizes (dx, dy, dz) in the frame's unit."""
         return self.frame.spacing
 
     @property
     def affine(self) -> NDArray[np.float64]:
+        """The 4x4 voxel-to-world affine."""
         return self.frame.affine
 
     @property
     def shape(self) -> tuple:
+        """The array's (X, Y, Z) shape."""
         return self.data.shape
 
     @property
     def dtype(self):
+        """The array's data type."""
         return self.data.dtype
 
     def __array__(self, dtype=None, copy=None):

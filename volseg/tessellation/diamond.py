@@ -81,6 +81,7 @@ class Diamond:
                 if all(self._inside(p) for p in tet)]
 
     def parents(self) -> list[tuple]:
+        """The centres of the diamonds that must split before this one."""
         v, a = self.centre, self.scale
         if self.kind == 0:
             if a == self.n // 2:
@@ -99,6 +100,7 @@ class Diamond:
         return [p for p in out if self._inside(p)]
 
     def children(self) -> list[tuple]:
+        """The centres of the diamonds this one's split creates."""
         v, a = self.centre, self.scale
         if self.kind == 0:
             out = [_moved(v, i, s * a) for i in range(3) for s in (-1, 1)]

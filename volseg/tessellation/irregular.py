@@ -109,7 +109,6 @@ def irregular_cube_mesh(n_vertices: int, *, seed=0, min_distance: float = 0.5,
     -------
     IrregularMesh
     """
-
     if n_vertices < 27:
         raise ValueError(f"`n_vertices` must be at least 27, got {n_vertices}")
     rng = np.random.default_rng(seed)

@@ -16,8 +16,8 @@ from volseg.morse import _group_tree
 from volseg.morse.blocks import _build as _blocks
 from volseg.morse.blocks import _ranks
 
-from ...conftest import smooth_random_field
 from ...blockwise.test_blockwise import assert_same_hierarchy
+from ...conftest import smooth_random_field
 
 
 @pytest.fixture(autouse=True)
