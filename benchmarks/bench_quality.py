@@ -6,7 +6,7 @@ Rician noise over everything. Every method is asked for as many regions as there
 parts and scored over the true parts' voxels (the background is not a part):
 adjusted Rand index (1 = the truth), variation of information (0 = the truth), the
 effective number of regions (1 / sum of squared shares), and the Huang-Dom
-similarity of the noisy segmentation to the clean one (DESIGN.md section 6; 1 for
+similarity of the noisy segmentation to the clean one (docs/design.md section 6; 1 for
 one giant region, so read it beside the others).
 
 Methods, on the same field:

@@ -1,5 +1,5 @@
 """The paper's analytic evaluation (Figs. 2 and 3): curvature error of weighted
-distortion vs Laplace-Beltrami on the six test functions of DESIGN.md section 7.
+distortion vs Laplace-Beltrami on the six test functions of docs/design.md section 7.
 
     python -m pipelines.analytic --out runs/analytic [--quick]
 

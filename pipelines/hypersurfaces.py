@@ -11,7 +11,7 @@ compared with the exact H at every vertex with a complete star, raw and after 50
 rounds of 1-ring averaging (the paper's smoothing).
 
 Part 2, how much is the mesh and how much the operator: the six graph test functions
-of DESIGN.md section 7 on four meshes of the cube with about the same vertex count:
+of docs/design.md section 7 on four meshes of the cube with about the same vertex count:
 the Kuhn grid, random Delaunay (dart throwing), the same after optimal-Delaunay
 (ODT) smoothing, and a jittered body-centred-cubic lattice.
 

@@ -134,7 +134,7 @@ def test_implicit_mean_curvature_sphere_graph_and_cylinder():
     # Closed form: sphere F = -|p|^2, gradient -2p, Hessian -2I.
     assert np.allclose(implicit_mean_curvature(-2 * points, -2 * np.eye(4)[None].repeat(20, 0)),
                        1 / 0.6)
-    # F = f(x) - y reduces to the graph formula (DESIGN.md sections 2 and 11).
+    # F = f(x) - y reduces to the graph formula (docs/design.md sections 2 and 11).
     for function in FUNCTIONS.values():
         x = rng.uniform(-0.8, 0.8, (15, 3))
         on = np.c_[x, function(*x.T)]

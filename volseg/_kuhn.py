@@ -3,7 +3,7 @@
 Every cube of a grid is split into d! simplices, one per permutation (a, b, ...) of
 the axes, along the path ``0 -> e_a -> e_a + e_b -> ... -> (1, ..., 1)`` from the
 cube's lowest corner; the same split everywhere makes the tessellation conforming
-(DESIGN.md section 4). Its edges join grid points whose difference is a nonzero 0/1
+(docs/design.md section 4). Its edges join grid points whose difference is a nonzero 0/1
 vector or the negative of one. This is a leaf module (numpy only): the tessellations,
 the grid curvature's stencil tables and the Morse stage's grid neighbourhood read it.
 """

@@ -2,7 +2,7 @@
 
 Each function comes with closed-form gradient and Hessian (no finite differences),
 and `mean_curvature` gives the exact H of its graph with upward normal
-(DESIGN.md section 2): ``H = -[(1 + |g|^2) tr(Hf) - g^T Hf g] / (n W^3)``.
+(docs/design.md section 2): ``H = -[(1 + |g|^2) tr(Hf) - g^T Hf g] / (n W^3)``.
 """
 
 from __future__ import annotations
@@ -63,7 +63,7 @@ def _hess(xx, xy, xz, yy, yz, zz):
 
 
 def functions(cubic_sign: float = -1.0) -> dict[str, TestFunction]:
-    """The six functions of DESIGN.md section 7, keyed by short name.
+    """The six functions of docs/design.md section 7, keyed by short name.
 
     Parameters
     ----------
@@ -138,7 +138,7 @@ FUNCTIONS = functions()
 
 def normalized_rms_error(estimate, exact, mask=None) -> float:
     """RMS of (estimate - exact) over `mask` (default: where the estimate is finite),
-    divided by the range max - min of the exact values there (DESIGN.md section 7)."""
+    divided by the range max - min of the exact values there (docs/design.md section 7)."""
     estimate, exact = np.asarray(estimate, float), np.asarray(exact, float)
     mask = np.isfinite(estimate) if mask is None else np.asarray(mask, bool) & np.isfinite(estimate)
     if not mask.any():
@@ -152,7 +152,7 @@ def normalized_rms_error(estimate, exact, mask=None) -> float:
 
 
 def implicit_mean_curvature(gradient, hessian) -> NDArray[np.float64]:
-    """H of the level set of F through a point, normal toward lower F (DESIGN.md section 11).
+    """H of the level set of F through a point, normal toward lower F (docs/design.md section 11).
 
     ``H = -[|g|^2 tr(Hess) - g^T Hess g] / (n |g|^3)`` with g = grad F, n = dim - 1:
     +1/r on the sphere ``F = -|p|^2``; for ``F = f(x) - y`` it is the graph formula.

@@ -1,4 +1,4 @@
-"""Foreground masks: which voxels the Morse stage segments (DESIGN.md section 9).
+"""Foreground masks: which voxels the Morse stage segments (docs/design.md section 9).
 
 Scientific volumes are mostly empty (94.8 % of fuel's voxels and 53.6 % of neghip's
 are exactly 0). On such a plateau the curvature is exactly 0 and the descending

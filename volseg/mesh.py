@@ -2,7 +2,7 @@
 
 A mesh is a pair ``(vertices, simplices)``: ``vertices`` is a (V, d) float array,
 ``simplices`` an (S, n+1) int array of vertex indices whose order fixes each
-simplex's orientation (DESIGN.md section 2). Nothing here modifies its input.
+simplex's orientation (docs/design.md section 2). Nothing here modifies its input.
 """
 
 from __future__ import annotations
@@ -279,7 +279,7 @@ def _edge_vectors(vertices: NDArray, simplices: NDArray) -> NDArray[np.float64]:
 def _cofactor_normals(edges: NDArray[np.float64]) -> NDArray[np.float64]:
     """(S, n+1) signed cofactor vectors nu_c = (-1)^c det(E without column c).
 
-    Their norm is n! times the simplex volume; ``det[nu; E] > 0`` (DESIGN.md section 2).
+    Their norm is n! times the simplex volume; ``det[nu; E] > 0`` (docs/design.md section 2).
     """
     n_plus_1 = edges.shape[2]
     if n_plus_1 == 4:  # generalized cross product of three 4-vectors, from 2x2 minors

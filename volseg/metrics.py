@@ -32,7 +32,7 @@ DEGENERATE_REAL_SHARE = 0.25
 
 
 def region_spread(sizes: ArrayLike) -> dict:
-    """How evenly a segmentation's regions share its voxels (DESIGN.md section 12).
+    """How evenly a segmentation's regions share its voxels (docs/design.md section 12).
 
     Parameters
     ----------

@@ -58,7 +58,7 @@ AUTO_INTEGER_SIGMA = 1.0
 AUTO_NOISE_UNIT = 2.5
 #: ... and at most this.
 AUTO_MAX_SIGMA = 2.0
-#: Default measure of the cut (DESIGN.md section 12).
+#: Default measure of the cut (docs/design.md section 12).
 DEFAULT_MEASURE = "hypervolume"
 #: Where ``n_regions="auto"`` looks for the largest persistence gap: the paper's range.
 AUTO_REGION_RANGE = (20, 40)
@@ -209,7 +209,7 @@ class CutRequest:
     ``auto`` (the count in `AUTO_REGION_RANGE` at the largest gap between the
     measure's extinctions); `checked` gives `DEFAULT_REGIONS` when nothing is asked.
 
-    `measure` is one of `volseg.morse.MEASURES` (DESIGN.md section 12); the
+    `measure` is one of `volseg.morse.MEASURES` (docs/design.md section 12); the
     persistence measure's threshold is `min_persistence`.
     """
 
@@ -534,12 +534,12 @@ def segment_volume(
     """Segment a volume by the descending Morse complex of its mean curvature.
 
     Segment centres sit at maxima of the curvature field (peaks of a density),
-    boundaries in its valleys (DESIGN.md section 2).
+    boundaries in its valleys (docs/design.md section 2).
 
     Parameters
     ----------
     volume : (X, Y, Z) array_like, Dask array, or Volume
-        A Dask array is segmented block by block (DESIGN.md section 10); the
+        A Dask array is segmented block by block (docs/design.md section 10); the
         labels, curvature and mask come back as lazy Dask arrays.
     operator : {'weighted', 'unweighted', 'laplace_beltrami', 'intrinsic'}
     min_persistence : float, optional
@@ -568,7 +568,7 @@ def segment_volume(
         2 `smooth_sigma` voxels vanish. Default `auto_smoothing`: for integers of
         at most 16 bits 1 to 2 voxels by the measured noise, else 0.
     measure : {'persistence', 'size', 'hypervolume'}, optional
-        What decides which regions survive the cut (DESIGN.md section 12;
+        What decides which regions survive the cut (docs/design.md section 12;
         default `DEFAULT_MEASURE`): ``persistence`` keeps the tallest peaks of the
         curvature, ``size`` the largest regions (Carr et al. 2004: the smallest
         region merges across its highest saddle until `n_regions` are left),
@@ -587,6 +587,47 @@ def segment_volume(
     Returns
     -------
     Segmentation
+        Its `labels` (regions 1..k, 0 outside the mask), `curvature`, `hierarchy`
+        (cut it again with `Segmentation.recut`) and the choices made.
+
+    See Also
+    --------
+    volseg.morse.descending_complex : the Morse stage alone, on any field or graph.
+    volseg.curvature.grid_curvature : the curvature stage alone.
+    volseg.metrics.compare : Huang-Dom similarity and variation of information [4]_.
+    skimage.segmentation.watershed : marker flooding, a close relative.
+
+    Notes
+    -----
+    The volume's graph in R^4 is tessellated by the Kuhn split and its mean curvature
+    estimated by the weighted extrinsic distortion [1]_; the descending Morse complex of
+    that field is simplified by the elder rule [2]_ and cut by a measure (the height,
+    or a region's size or hypervolume pruned as in [3]_), all on one hierarchy.
+
+    References
+    ----------
+    .. [1] P. Simari, L. De Floriani, F. Iuricich, M. M. Mesmoudi, "Generalized
+           extrinsic distortion and applications", Computers & Graphics 37(6),
+           SMI 2013.
+    .. [2] H. Edelsbrunner, D. Letscher, A. Zomorodian, "Topological persistence and
+           simplification", Discrete & Computational Geometry 28, 2002.
+    .. [3] H. Carr, J. Snoeyink, M. van de Panne, "Simplifying flexible isosurfaces
+           using local geometric measures", IEEE Visualization 2004.
+    .. [4] Q. Huang, B. Dom, "Quantitative methods of evaluating image segmentation",
+           ICIP 1995.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from volseg import segment_volume
+    >>> x, y, z = np.meshgrid(*[np.linspace(-1, 1, 24)] * 3, indexing="ij")
+    >>> blob = lambda cx: np.exp(-8 * ((x - cx)**2 + y**2 + z**2))
+    >>> two_blobs = blob(0.5) + blob(-0.5)
+    >>> result = segment_volume(two_blobs, n_regions=2, mask=None)
+    >>> result.n_regions, result.labels.shape
+    (2, (24, 24, 24))
+    >>> int(result.labels[4, 12, 12]) != int(result.labels[19, 12, 12])   # one blob each
+    True
     """
     data = getattr(volume, "data", volume)
     lazy = _validate.is_lazy(data)
@@ -624,7 +665,7 @@ def segment_mesh(
     ----------
     vertices : (V, n+1) array_like of float
     simplices : (S, n+1) array_like of int
-        Consistently oriented (DESIGN.md section 2); H > 0 where the surface bends
+        Consistently oriented (docs/design.md section 2); H > 0 where the surface bends
         away from its normals (on a blob with outward normals, everywhere).
     operator : {'weighted', 'unweighted', 'laplace_beltrami', 'intrinsic'}
     n_regions : int or 'auto', optional

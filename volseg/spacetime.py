@@ -31,7 +31,7 @@ from .tessellation.mesh_quality import quality, relax_isosurface
 
 __all__ = ["SpaceTimeSegmentation", "TimeSlice", "segment_series", "time_slices"]
 
-#: Relaxation rounds by default (DESIGN.md section 11: 10 rounds take the S^3 median
+#: Relaxation rounds by default (docs/design.md section 11: 10 rounds take the S^3 median
 #: of H r from +10 % to within 1 % at 17^4 samples).
 DEFAULT_RELAX = 10
 #: Memory of `segment_series` per grid cell the level cuts, the bound `memory_limit`

@@ -1,4 +1,4 @@
-"""Dask in, Dask out (DESIGN.md section 10): blockwise curvature and the blockwise
+"""Dask in, Dask out (docs/design.md section 10): blockwise curvature and the blockwise
 Morse build equal the in-memory ones (bit for bit, event for event) on awkward
 chunkings (uneven, 2 voxels thick, one block), plateaus and exact ties, for every
 operator and connectivity."""
@@ -109,7 +109,7 @@ def test_blockwise_pipeline_dask_curvature_into_dask_morse(small):
 
 @pytest.mark.parametrize("kind", ["smooth", "ties"])
 def test_blockwise_morse_with_a_mask_equals_in_memory(small, kind):
-    # DESIGN.md section 9 on blocks: a mask of several components (a lone voxel, a
+    # docs/design.md section 9 on blocks: a mask of several components (a lone voxel, a
     # slab, blobs), chunks that cut through them, values outside the mask NaN (ignored).
     field = small if kind == "smooth" else quantized(small)
     rng = np.random.default_rng(11)

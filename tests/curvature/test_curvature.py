@@ -101,7 +101,7 @@ def test_sphere_n2_pointwise_median_converges():
 
 
 def test_graph_peak_is_positive_and_bowl_negative():
-    # DESIGN.md section 2: f = -0.4|x|^2 has H(0) = +0.8 (n = 3), f = +0.4|x|^2 has -0.8.
+    # docs/design.md section 2: f = -0.4|x|^2 has H(0) = +0.8 (n = 3), f = +0.4|x|^2 has -0.8.
     for sign in (-1, 1):
         v, s = tessellation.kuhn_cube_mesh(
             33, lambda x, y, z, sign=sign: sign * 0.4 * (x * x + y * y + z * z))

@@ -1,4 +1,4 @@
-"""Size-aware cuts of the hierarchy (DESIGN.md section 12): the pruning against a
+"""Size-aware cuts of the hierarchy (docs/design.md section 12): the pruning against a
 naive one on the whole cell graph, the measures against their definitions, blockwise
 equal to in memory, persistence unchanged, small mask components dropped."""
 

@@ -1,4 +1,4 @@
-"""Isosurfaces on the Kuhn triangulation (DESIGN.md section 11): exact small cases in
+"""Isosurfaces on the Kuhn triangulation (docs/design.md section 11): exact small cases in
 2-D and 3-D, the 3-sphere in R^4, ties, boundaries, and the mesh-quality option."""
 
 import itertools

@@ -69,7 +69,7 @@ def test_irregular_smoothing_moves_only_interior_points():
 
 
 def test_dihedral_angles_of_the_kuhn_tetrahedron():
-    # Class 0 of DESIGN.md section 8: 45, 45, 60, 90, 90, 90 degrees.
+    # Class 0 of docs/design.md section 8: 45, 45, 60, 90, 90, 90 degrees.
     tet = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [1, 1, 1]], dtype=float)
     angles = np.sort(dihedral_angles(tet, np.array([[0, 1, 2, 3]]))[0])
     np.testing.assert_allclose(angles, [45, 45, 60, 90, 90, 90])

@@ -1,7 +1,7 @@
 """The stencil kernels' angles: ``atan2(sqrt(s2), c) * sqrt(a2)``, compiled inline.
 
 Each face of the weighted operator's stencil contributes its bending angle |psi| =
-atan2(|N_a ^ N_b|, N_a . N_b) times its area (DESIGN.md section 3; the kernel gives it
+atan2(|N_a ^ N_b|, N_a . N_b) times its area (docs/design.md section 3; the kernel gives it
 its sign by the side the far vertex lies on), 12 faces per voxel. Written as
 ``math.atan2(math.sqrt(s2), c) * math.sqrt(a2)``, the kernel spent half its time
 there: glibc's `atan2` is correctly rounded, with slow paths, and two square roots

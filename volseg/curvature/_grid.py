@@ -54,7 +54,7 @@ def grid_curvature(
 ) -> NDArray[np.float64]:
     """Curvature of a volume's graph in R^4, on the implicit Kuhn tessellation.
 
-    Vertex (i, j, k) is ``(i dx, j dy, k dz, s f[i, j, k])`` (DESIGN.md section 2);
+    Vertex (i, j, k) is ``(i dx, j dy, k dz, s f[i, j, k])`` (docs/design.md section 2);
     the tessellation is the Kuhn split of every grid cube (section 4), oriented with
     upward normals. At interior voxels the result equals
     ``vertex_curvature(*kuhn_grid_mesh(volume, spacing, value_scale), operator)`` to

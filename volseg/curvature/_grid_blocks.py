@@ -1,4 +1,4 @@
-"""`grid_curvature` of a Dask array: the same kernel, block by block (DESIGN.md section 10).
+"""`grid_curvature` of a Dask array: the same kernel, block by block (docs/design.md section 10).
 
 Every voxel's curvature depends on its 1-ring only (the faces through it and the
 tetrahedra on both sides of each lie within one step). So each block of the input

@@ -27,7 +27,7 @@ def vertex_curvature(
     ----------
     vertices : (V, n+1) array_like of float
     simplices : (S, n+1) array_like of int
-        Consistently oriented n-simplices, indices into `vertices` (DESIGN.md
+        Consistently oriented n-simplices, indices into `vertices` (docs/design.md
         section 2); a graph of a function should have upward normals.
     operator : {'weighted', 'unweighted', 'laplace_beltrami', 'intrinsic'}
         ``'weighted'``: the paper's mean-curvature estimate

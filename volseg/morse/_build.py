@@ -1,6 +1,6 @@
 """The in-memory build of the descending complex: steepest ascent and path
 compression to cells, one edge per pair of adjacent cells with its highest saddle,
-then the elder-rule union-find (DESIGN.md section 5)."""
+then the elder-rule union-find (docs/design.md section 5)."""
 
 from __future__ import annotations
 
@@ -84,7 +84,7 @@ def descending_complex(field: ArrayLike, *, adjacency=None, connectivity="kuhn",
     field : ndarray of real, or 3-D Dask array
         On a grid: an N-d array (1-D, 2-D or 3-D), neighbours by `connectivity`.
         On a graph: a 1-D array, one value per vertex, with `adjacency`. A Dask
-        array is built block by block (DESIGN.md section 10), the same result.
+        array is built block by block (docs/design.md section 10), the same result.
     adjacency : scipy sparse matrix, (E, 2) int array or networkx graph, optional
         Vertex adjacency (symmetrised; self-loops ignored). Structure, not weight:
         any stored nonzero of a sparse matrix is an edge, whatever its value or
@@ -93,7 +93,7 @@ def descending_complex(field: ArrayLike, *, adjacency=None, connectivity="kuhn",
     connectivity : {'kuhn', 4, 8, 6, 18, 26, 2}
         Grid neighbourhood (see `grid_offsets`); ignored with `adjacency`.
     mask : bool ndarray (or Dask array) of the field's shape, optional
-        The vertices that take part (DESIGN.md section 9): the graph is restricted
+        The vertices that take part (docs/design.md section 9): the graph is restricted
         to them (an edge only between two masked vertices), so maxima, cells,
         saddles and persistence are those of the foreground, exactly as with the
         explicit restricted adjacency; values outside the mask are ignored (they may
@@ -109,6 +109,40 @@ def descending_complex(field: ArrayLike, *, adjacency=None, connectivity="kuhn",
     Returns
     -------
     MorseHierarchy
+        Cut it with ``segment(min_persistence=...)`` or ``segment(n_regions=...)``,
+        by any measure of `volseg.morse.MEASURE_REGISTRY`, without recomputation.
+
+    See Also
+    --------
+    MorseHierarchy.segment : labels of a cut.
+    volseg.segment_volume : the whole pipeline on a volume.
+    skimage.segmentation.watershed : flooding from markers (h-maxima), a relative.
+    higra.watershed_hierarchy_by_dynamics : the same hierarchy up to ties.
+
+    Notes
+    -----
+    Each vertex joins the cell of the maximum its steepest ascent reaches; the cells'
+    merge events follow the elder rule over the highest saddle between adjacent cells
+    (Edelsbrunner et al. [1]_), ties broken by vertex index (simulation of simplicity);
+    a cut by size or hypervolume prunes them as Carr et al. [2]_.
+
+    References
+    ----------
+    .. [1] H. Edelsbrunner, D. Letscher, A. Zomorodian, "Topological persistence and
+           simplification", Discrete & Computational Geometry 28, 2002.
+    .. [2] H. Carr, J. Snoeyink, M. van de Panne, "Simplifying flexible isosurfaces
+           using local geometric measures", IEEE Visualization 2004.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from volseg.morse import descending_complex
+    >>> field = np.array([0.0, 3.0, 1.0, 2.0, 0.5])     # peaks at 1 and 3
+    >>> hierarchy = descending_complex(field)
+    >>> hierarchy.persistence.tolist()
+    [inf, 1.0]
+    >>> hierarchy.segment(n_regions=2).tolist(), hierarchy.segment(min_persistence=1.5).tolist()
+    ([1, 1, 1, 2, 2], [1, 1, 1, 1, 1])
 
     Raises
     ------

@@ -72,6 +72,39 @@ def check_measure_cut(min_persistence=None, n_regions=None, measure="persistence
 class MorseHierarchy(SizedByArrays):
     """The descending Morse complex of a field and its merge hierarchy.
 
+    Made by `descending_complex`; every cut (`segment`, `region_of_maximum`) reads it
+    without recomputation, by persistence, size or hypervolume (docs/design.md sections
+    5 and 12).
+
+    See Also
+    --------
+    descending_complex : builds it.
+    volseg.morse.MEASURE_REGISTRY : the cut measures.
+
+    Notes
+    -----
+    The merge events are those of 0-dimensional persistence of the superlevel sets
+    (the elder rule of Edelsbrunner et al. 2002); a size measure prunes them as Carr et
+    al. 2004: the region of least measure merges across its highest saddle first.
+
+    References
+    ----------
+    H. Edelsbrunner, D. Letscher, A. Zomorodian, "Topological persistence and
+    simplification", Discrete & Computational Geometry 28, 2002.
+
+    H. Carr, J. Snoeyink, M. van de Panne, "Simplifying flexible isosurfaces using
+    local geometric measures", IEEE Visualization 2004.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from volseg.morse import descending_complex
+    >>> hierarchy = descending_complex(np.array([0.0, 3.0, 1.0, 2.0, 0.5]))
+    >>> hierarchy.maxima.tolist(), hierarchy.n_components
+    ([1, 3], 1)
+    >>> hierarchy.segment(n_regions=2, measure="size").tolist()
+    [1, 1, 1, 2, 2]
+
     Attributes
     ----------
     shape : tuple
@@ -152,7 +185,7 @@ class MorseHierarchy(SizedByArrays):
 
     def extinction(self, measure: str = "persistence") -> NDArray[np.float64]:
         """(E,) the measure at which each event merges: its persistence, or the
-        ``size`` / ``hypervolume`` of the region pruned across it (DESIGN.md section
+        ``size`` / ``hypervolume`` of the region pruned across it (docs/design.md section
         12; pruned once per measure, then every cut is a lookup)."""
         if not get_measure(measure).pruned:
             return self.event_persistence
@@ -336,7 +369,7 @@ class MorseHierarchy(SizedByArrays):
             regions left when the pruning by `measure` reaches that count. Fewer
             maxima than asked: all of them, with a warning.
         measure : {'persistence', 'size', 'hypervolume'}
-            What decides which regions survive (DESIGN.md section 12). ``size`` and
+            What decides which regions survive (docs/design.md section 12). ``size`` and
             ``hypervolume`` prune as Carr et al. (2004): the region of least measure
             merges across its highest saddle, its measure added to its neighbour's.
         threshold : float, optional

@@ -1,4 +1,4 @@
-"""Measures of the hierarchy's regions beside persistence (DESIGN.md section 12): each
+"""Measures of the hierarchy's regions beside persistence (docs/design.md section 12): each
 cell's size and hypervolume, additive over the cells of a region.
 
 - ``size``: the cell's vertices (voxels), times the vertex weight (a voxel's volume
@@ -29,7 +29,7 @@ __all__ = ["Measure", "MEASURE_REGISTRY", "MEASURES", "PERSISTENCE", "SIZE", "ST
 
 @dataclass(frozen=True)
 class Measure:
-    """A cut measure (DESIGN.md section 12): what decides which regions survive a cut.
+    """A cut measure (docs/design.md section 12): what decides which regions survive a cut.
 
     `pruned`: False for a measure read off the elder-rule events as they are (the
     height, persistence); True for one that is a sum of per-vertex terms over a
@@ -59,7 +59,7 @@ MEASURE_REGISTRY = Registry("measure", [
             "field units x voxel volume", "the region's volume under the field "
             "above its saddle (Carr et al. 2004)", ("volume",)),
 ])
-#: The cut measures' names; ``persistence`` is the height of DESIGN.md section 5.
+#: The cut measures' names; ``persistence`` is the height of docs/design.md section 5.
 MEASURES = tuple(MEASURE_REGISTRY)
 #: The measure that `min_persistence` thresholds, read off the events as they are.
 PERSISTENCE = MEASURE_REGISTRY["persistence"]

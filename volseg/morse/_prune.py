@@ -1,4 +1,4 @@
-"""Compiled pruning of the hierarchy by an additive measure (DESIGN.md section 12),
+"""Compiled pruning of the hierarchy by an additive measure (docs/design.md section 12),
 and the one-pass sums of the cells' measures it prunes by.
 
 Carr, Snoeyink and van de Panne (2004): repeatedly take the region of least measure,

@@ -100,7 +100,7 @@ class LiveSegmentation:
         return self._recut(n_regions, threshold=threshold, measure=self.result.measure)
 
     def set_measure(self, measure: str):
-        """Cut by another measure (DESIGN.md section 12), keeping the region count:
+        """Cut by another measure (docs/design.md section 12), keeping the region count:
         the hierarchy has every measure, nothing is recomputed."""
         return self._recut(self.result.n_regions, measure=measure)
 

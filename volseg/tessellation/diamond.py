@@ -1,4 +1,4 @@
-"""Diamond meshes: adaptive longest-edge bisection of a (2^k + 1)^3 grid (DESIGN.md §8).
+"""Diamond meshes: adaptive longest-edge bisection of a (2^k + 1)^3 grid (docs/design.md §8).
 
 Weiss and De Floriani's diamond hierarchy: every grid point but the 8 root corners is
 the centre of one diamond (the tetrahedra sharing a spine edge, which split together

@@ -1,4 +1,5 @@
-"""Isosurfaces of sampled fields on the Kuhn triangulation, any dimension (DESIGN.md section 11).
+"""Isosurfaces of sampled fields on the Kuhn triangulation, any dimension
+(docs/design.md section 11).
 
 The level set ``{F = level}`` of the piecewise-linear interpolant of a field on the
 Kuhn (Freudenthal) triangulation of its grid: a closed polygon for a 2-D field, a
@@ -22,7 +23,7 @@ edge midpoints are a level set of the affine function that is 0 below and 1 abov
 which cuts the simplex into the same combinatorial pieces with the same orientations
 as any level in between, and their coordinates are half-integers. Each output simplex
 is ordered so that its normal points toward lower field values (outward for a blob,
-DESIGN.md sections 2 and 11).
+docs/design.md sections 2 and 11).
 """
 
 from __future__ import annotations
@@ -121,7 +122,7 @@ def _cut(simplices: NDArray, values: NDArray, level: float, coordinates) -> tupl
         if coordinates is not None:
             # Orientation at the edge midpoints: det[b - m_0; m_1 - m_0; ...] > 0 with
             # b a below point of the parent, on the normal's side (the normal is
-            # written first, DESIGN.md section 2).
+            # written first, docs/design.md section 2).
             mid = (coordinates(lower) + coordinates(upper)) * 0.5
             first_below = int(table[0, 0, 0])
             reference = np.repeat(rows[:, [first_below]], len(table), axis=0)

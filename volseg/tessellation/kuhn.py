@@ -1,4 +1,4 @@
-"""Kuhn (Freudenthal) tessellations of regular grids, any dimension (DESIGN.md section 4)."""
+"""Kuhn (Freudenthal) tessellations of regular grids, any dimension (docs/design.md section 4)."""
 
 from __future__ import annotations
 
@@ -47,7 +47,7 @@ def kuhn_simplices(shape, *, periodic=(), upward: bool = True) -> NDArray[np.int
                 p[:, a] %= shape[a]
         index = np.stack([np.ravel_multi_index(tuple(p.T), shape) for p in points], axis=1)
         # Base orientation is sign(perm); the graph normal's last component has sign
-        # (-1)^d sign(perm) (cofactor convention, DESIGN.md section 2).
+        # (-1)^d sign(perm) (cofactor convention, docs/design.md section 2).
         wanted = (-1) ** d if upward else 1
         if wanted * permutation_sign(perm) < 0:
             index[:, [0, 1]] = index[:, [1, 0]]

@@ -1,7 +1,7 @@
 """Better isosurface meshes without leaving the level set, and how to measure "better".
 
 Marching meshes are full of slivers: a crossing near a grid point gives simplices
-whose pointwise curvature means nothing (DESIGN.md section 11: the median of H r on
+whose pointwise curvature means nothing (docs/design.md section 11: the median of H r on
 the raw S^3 mesh is off by +10 % at 17^4 samples). `relax_isosurface` moves every
 vertex tangentially toward its 1-ring centroid and then back onto the level set of
 the field's cubic-spline interpolant along its gradient (Newton steps), a few

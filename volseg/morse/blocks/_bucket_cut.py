@@ -9,7 +9,7 @@ region id, ordered by extinction) in place of the buckets' events.
 2. A rule marks the merged events: persistence below a threshold, or after the
    count's last kept event in that order (as `_hierarchy._all_but_most_persistent`).
    Each merged maximum points to its target; the others are roots. A persistence cut
-   merges a maximum only with lower-persistence maxima below it on its way (DESIGN.md
+   merges a maximum only with lower-persistence maxima below it on its way (docs/design.md
    section 5), so each root is the highest maximum of its region, and region i + 1 is
    the i-th root in id order, as `_kernels.regions_of_cut` numbers them.
 3. Pointer jumping: each bucket follows its maxima's pointers inside itself, then

@@ -1,5 +1,5 @@
 """`descending_complex` of a 3-D Dask array: the in-memory build, block by block
-(DESIGN.md section 10).
+(docs/design.md section 10).
 
 1. Per block, with a 1-voxel halo (-inf outside the volume; `volseg._halo`, which
    frees each block once its halo layers are copied): steepest ascent and path
@@ -87,7 +87,7 @@ def _outer_layer(block):
 
 
 def _masked(field, mask):
-    """The field inside the mask, -inf outside it (DESIGN.md section 9: no edge has an
+    """The field inside the mask, -inf outside it (docs/design.md section 9: no edge has an
     end outside); NaN or infinite values inside the mask are refused."""
     values = np.asarray(field, dtype=np.float64)
     if not np.isfinite(values[mask]).all():
@@ -236,7 +236,7 @@ def dask_hierarchy(field, connectivity="kuhn", mask=None, hooks=None) -> Hierarc
     (`HierarchyOnWorkers`: the client holds O(blocks)).
 
     `mask`: a boolean array (numpy or Dask) of the field's shape, as in memory
-    (DESIGN.md section 9): the blocks see -inf outside it, so no edge leaves it;
+    (docs/design.md section 9): the blocks see -inf outside it, so no edge leaves it;
     cells are -1 there and cuts label it 0.
 
     `hooks` (`volseg._block_hooks.BlockHooks`, from the blockwise pipeline): ``wrap``

@@ -4,7 +4,7 @@
 Voxels are named by their global flat index (C order) ``gid``; "higher" is the
 in-memory order, (f(u), gid u) > (f(v), gid v), so every decision a block takes is
 the one the in-memory build takes. The halo holds the neighbours' values (-inf
-outside the volume); a block's own -inf voxels are outside a mask (DESIGN.md
+outside the volume); a block's own -inf voxels are outside a mask (docs/design.md
 section 9): no path enters them and they reach no maximum (`OUTSIDE`).
 """
 
