@@ -88,7 +88,7 @@ class MaskChoice:
         return "" if self.mask is None else f" in a {self.used} mask of {self.voxels} voxels"
 
 
-def foreground_mask(volume, rule="auto", *, value_range=None) -> MaskChoice:
+def foreground_mask(volume, rule="auto", *, value_range=None, lattice=None) -> MaskChoice:
     """Resolve a mask rule (or array) for `volume`; see the module docstring.
 
     Parameters
@@ -101,6 +101,10 @@ def foreground_mask(volume, rule="auto", *, value_range=None) -> MaskChoice:
     value_range : (min, max), optional
         Of `volume`, when the caller has it (`run_stages` does): spares a lazy
         volume's rules another pass for it.
+    lattice : volseg._lattice.Lattice, optional
+        The levels a quantised `volume` lies on: ``"auto"`` and ``"otsu"`` then read
+        its histogram of levels, so that every exactly scaled or offset copy of a
+        volume gets the same mask (the threshold is still said in its values).
 
     Returns
     -------
@@ -134,6 +138,8 @@ def foreground_mask(volume, rule="auto", *, value_range=None) -> MaskChoice:
             mask = _like(mask, data)
         return _checked(MaskChoice(mask, "array", "array", 0))
     name, threshold = check_rule(rule)
+    if lattice is not None and name in ("auto", "otsu"):
+        return _on_levels(data, rule, lattice)
     if name == "auto":
         return _auto(data, lazy, value_range)
     if name == "nonzero":
@@ -181,6 +187,23 @@ def _checked(choice: MaskChoice) -> MaskChoice:
 def _compute(x):
     """A numpy result of `x`, computed if it is lazy (on Dask's current scheduler)."""
     return x.compute() if hasattr(x, "compute") else x
+
+
+def _on_levels(data, rule, lattice) -> MaskChoice:
+    """`foreground_mask` of the lattice integers of `data`, its threshold said in the
+    values of `data`."""
+    import re
+
+    from ._lattice import on_lattice
+
+    choice = foreground_mask(on_lattice(data, lattice), rule,
+                             value_range=(0.0, float(lattice.levels - 1)))
+
+    def in_values(match):
+        return f"{match[1]}{lattice.low + lattice.step * float(match[2]):g}"
+
+    used = re.sub(r"(value[<>]=?)([-+0-9.e]+)", in_values, choice.used)
+    return MaskChoice(choice.mask, choice.rule, used, choice.voxels)
 
 
 def _auto(data, lazy: bool, value_range=None) -> MaskChoice:

@@ -21,6 +21,7 @@ from numpy.typing import NDArray
 from . import _validate
 from ._block_hooks import BlockHooks
 from ._block_hooks import compute as _compute
+from ._lattice import lattice_of, on_lattice
 from ._smoothing import gaussian, noise_sigma
 from .curvature import (
     Operator,
@@ -309,33 +310,38 @@ class SegmentRequest:
                    None if dtype is None else np.dtype(dtype),
                    None if chunks is None else _validate.chunk_edge(chunks))
 
-    def with_smoothing(self, data, mask) -> SegmentRequest:
+    def with_smoothing(self, data, mask, lattice=None) -> SegmentRequest:
         """The request with its smoothing resolved: `auto_smoothing` of `data` inside
-        `mask` when none was given."""
+        `mask` when none was given (`lattice`: the levels the input lies on)."""
         if self.smooth_sigma is not None:
             return self
-        sigma, rule = auto_smoothing(data, mask, self.dtype)
+        sigma, rule = auto_smoothing(data, mask, self.dtype, lattice=lattice)
         return dataclasses.replace(self, smooth_sigma=sigma, smooth_rule=rule)
 
 
-def auto_smoothing(data, mask=None, dtype=None) -> tuple:
+def auto_smoothing(data, mask=None, dtype=None, *, lattice=None) -> tuple:
     """(sigma, rule) of the default pre-smoothing of `data` (values of `dtype`, by
     default the array's: the file's type, before any added noise).
 
-    Integers of at most 16 bits (8-bit CT and MRI, 12-bit scanners): their
-    quantization steps are voxel-sized curvature noise, so sigma is at least
+    Quantised data, on a lattice of at most 2^16 levels whatever its type (8-bit CT and
+    MRI, 12-bit scanners, an 8-bit scan saved as float32 / 255: `volseg._lattice`):
+    its steps are voxel-sized curvature noise, so sigma is at least
     `AUTO_INTEGER_SIGMA`; with more noise, ``sqrt(noise / AUTO_NOISE_UNIT)`` up to
-    `AUTO_MAX_SIGMA`, where noise is `volseg._smoothing.noise_sigma` inside `mask`
-    (in the values' units: 1 on a clean 8-bit scan, 12 under Rician noise of 12).
-    Floats and wider integers (simulations, float maps): 0.
+    `AUTO_MAX_SIGMA`, where noise is `volseg._smoothing.noise_sigma` inside `mask` in
+    steps of the lattice (1 on a clean 8-bit scan, 12 under Rician noise of 12). So
+    every exactly scaled or offset copy of a volume gets the same sigma. `lattice`: the
+    one `data` was mapped from (its integers given as `data`); None with an integer
+    `dtype` of at most 16 bits means steps of 1. Continuous values (simulations, float
+    maps): 0.
     """
     dtype = np.dtype(data.dtype if dtype is None else dtype)
-    if dtype.kind not in "biu" or dtype.itemsize > 2:
+    if lattice is None and (dtype.kind not in "biu" or dtype.itemsize > 2):
         return 0.0, f"auto: {dtype} values, none"
     noise = noise_sigma(data, mask)
     sigma = round(float(np.clip(np.sqrt(noise / AUTO_NOISE_UNIT), AUTO_INTEGER_SIGMA,
                                 AUTO_MAX_SIGMA)), 2)
-    return sigma, f"auto: {dtype} values, noise {noise:.3g}"
+    steps = "" if lattice is None else f" steps ({lattice.describe()})"
+    return sigma, f"auto: {dtype} values, noise {noise:.3g}{steps}"
 
 
 class Storage:
@@ -409,13 +415,18 @@ def run_stages(data, request: SegmentRequest, storage: Storage | None = None, *,
     (Segmentation, (min, max) of the input's values)
     """
     storage = storage or InMemory()
+    raw = data                                       # values as read: the mask's rules
     value_range = input_range(data)                  # one pass, before anything is kept
     if not all(np.isfinite(v) for v in value_range):
         raise ValueError(f"{source} holds NaN or infinite values (its range is "
                          f"{value_range[0]} .. {value_range[1]}); replace them first")
-    choice = foreground_mask(data, request.mask, value_range=value_range)   # values as read
-    data, shifted_range = _exact_in_float64(data, value_range)
-    request = request.with_smoothing(data, choice.mask)
+    data, shifted_range, lattice = _as_computed(data, value_range)
+    # A mask rule reads the histogram of levels, unless the values are those levels
+    # already (integers of step 1: the same histogram, as before the lattice).
+    levels = None if lattice is None or (raw.dtype.kind in "iu" and lattice.step == 1) \
+        else lattice
+    choice = foreground_mask(raw, request.mask, value_range=value_range, lattice=levels)
+    request = request.with_smoothing(data, choice.mask, lattice)
     storage.begin(choice, request)
     hooks = storage.block_hooks       # set by `begin` (the blockwise work folder's)
     timings = {}
@@ -485,6 +496,20 @@ def _default_scale(values, request, value_range, source) -> float:
         raise ValueError(f"{source}: its values span {value_range[0]:g} .. {value_range[1]:g}, "
                          "too narrow or too wide a range for a default value scale; give "
                          "one (value_scale, --value-scale)") from None
+
+
+def _as_computed(data, value_range) -> tuple:
+    """(data, its range, lattice) as the stages compute on it: a quantised volume as
+    its lattice integers (`volseg._lattice`: every exactly scaled or offset copy the
+    same numbers, docs/design.md section 13), 64-bit integers beyond 2^53 as offsets
+    (`_exact_in_float64`), anything else as it is (lattice None)."""
+    data, value_range = _exact_in_float64(data, value_range)
+    lattice = lattice_of(data, value_range)
+    if lattice is None:
+        return data, value_range, None
+    if data.dtype.kind in "iu" and lattice.step == 1 and lattice.low == 0:
+        return data, value_range, lattice          # already its own integers
+    return on_lattice(data, lattice), (0, lattice.levels - 1), lattice
 
 
 def _exact_in_float64(data, value_range) -> tuple:
