@@ -98,3 +98,14 @@ def test_region_spread_of_even_uneven_and_degenerate_cuts():
     assert region_spread([995, 5])["degenerate"]          # two regions, one a speck
     with pytest.raises(ValueError, match="sizes"):
         region_spread([])
+
+
+def test_adjusted_rand_index_is_one_for_a_relabelling_and_zero_by_chance():
+    from volseg.metrics import adjusted_rand_index
+
+    rng = np.random.default_rng(0)
+    a = rng.integers(0, 5, 20_000)
+    assert adjusted_rand_index(a, (a + 3) % 7) == pytest.approx(1.0)
+    assert abs(adjusted_rand_index(a, rng.integers(0, 5, 20_000))) < 0.01
+    # Hubert and Arabie's example value, checked by hand: a 2x2 table [[2, 1], [0, 2]].
+    assert adjusted_rand_index([0, 0, 0, 1, 1], [0, 0, 1, 1, 1]) == pytest.approx(1 / 6)

@@ -19,6 +19,7 @@ from ._version import __version__
 from .blockwise.engine import MEMORY_SHARE, default_memory_limit, parse_bytes
 from .curvature import cli_choices, normalize_operator
 from .errors import UsageError
+from .fields import FIELD_REGISTRY
 from .morse import MEASURES
 from .segment import (
     AUTO_INTEGER_SIGMA,
@@ -61,6 +62,13 @@ def _add_segment(sub):
     cut.add_argument("--threshold", type=float, metavar="T",
                      help="instead of a count: merge every region whose --measure is below T "
                      "(size: in world units, voxels times the voxel volume)")
+    seg.add_argument("--field", default="curvature", metavar="FIELD",
+                     help="the field the regions are cut from: curvature (default, the "
+                     "paper's: territories around curvature peaks), gradient (basins of "
+                     "the gradient magnitude: regions bounded by edges, a watershed "
+                     "hierarchy; best on anatomy and other piecewise-smooth scans), value "
+                     "(bright blobs of the values; |value| on a signed map), or a volume "
+                     "file of the same grid to cut as it is")
     seg.add_argument("--measure", choices=MEASURES, default=None,
                      help=f"what decides which regions survive the cut (default "
                      f"{DEFAULT_MEASURE}; persistence with --min-persistence): persistence "
@@ -250,7 +258,8 @@ def _progress(quiet):
 _OPTIONS = {"n_regions": "--regions", "min_persistence": "--min-persistence",
             "threshold": "--threshold", "measure": "--measure", "min_component": "--min-component",
             "smooth_sigma": "--smooth", "mask": "--mask", "chunks": "--chunks",
-            "operator": "--operator", "value_scale": "--value-scale", "smooth_rounds": "--smooth"}
+            "operator": "--operator", "value_scale": "--value-scale", "smooth_rounds": "--smooth",
+            "field": "--field"}
 
 
 def _checked_request(**options):
@@ -282,9 +291,10 @@ def _cmd_segment(args):
     say = _progress(args.quiet)
     out_dir = Path(args.out_dir)
     mask = args.mask if args.mask_threshold is None else f"value>{args.mask_threshold!r}"
+    field = args.field if FIELD_REGISTRY.get(args.field) else None    # else a file
     request = _checked_request(**_cut_options(args), operator=args.operator, mask=mask,
                                smooth_sigma=args.smooth_sigma, value_scale=args.value_scale,
-                               chunks=args.chunks)
+                               chunks=args.chunks, field=field or "curvature")
     engine = Engine(args.scheduler, workers=args.workers, memory_limit=args.memory_limit,
                     hierarchy_memory=args.hierarchy_memory,
                     threads_per_worker=args.threads_per_worker,
@@ -297,6 +307,9 @@ def _cmd_segment(args):
                                chunks=request.chunks, channel=args.channel,
                                ome_level=args.ome_level, say=say)
                for name in args.inputs]
+    if field is None:                       # a field of the user's, read like an input
+        field = load_for_budget(args.field, engine.memory_limit, chunks=request.chunks,
+                                allow_external_data=args.allow_external_data).data
     summaries = segment_files(
         volumes, out_dir, force=args.force, wait=args.wait,
         persistence_plot=args.plot_persistence, paraview=args.vti, engine=engine, say=say,
@@ -304,7 +317,7 @@ def _cmd_segment(args):
         min_persistence=args.min_persistence, value_scale=args.value_scale, noise=args.noise,
         seed=args.seed, mask=mask, smooth_sigma=args.smooth_sigma, measure=args.measure,
         threshold=args.threshold, min_component=args.min_component,
-        labels_into_input=args.labels_into_input, ome_level=args.ome_level)
+        labels_into_input=args.labels_into_input, ome_level=args.ome_level, field=field)
     if args.json:
         print(_json.dumps(summaries if len(summaries) > 1 else summaries[0], indent=2))
     return 0

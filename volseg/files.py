@@ -28,6 +28,7 @@ from . import _validate
 from ._jit_cache import first_run_note
 from .curvature import entry_kernels as curvature_kernels
 from .errors import UsageError
+from .fields import field_entry
 from .io import Frame, OutputSet
 from .morse import entry_kernels as morse_kernels
 from .outputs import (
@@ -155,7 +156,7 @@ def _refuse_noise_when_lazy(volumes, noise):
 
 
 def output_sets(volumes, out_dir, *, force=False, wait=False, persistence_plot=False,
-                paraview=None) -> list:
+                paraview=None, field="curvature") -> list:
     """One `OutputSet` per volume (not yet entered); two inputs with one stem are
     refused before anything is computed."""
     seen = {}
@@ -165,8 +166,9 @@ def output_sets(volumes, out_dir, *, force=False, wait=False, persistence_plot=F
                 f"{seen[volume.name]} and {volume.path or volume.name} would both write "
                 f"{Path(out_dir) / volume.name}_*; segment them into different folders")
         seen[volume.name] = volume.path or volume.name
+    name = field_entry(field).name
     return [OutputSet(out_dir, v.name, output_names(v.name, persistence_plot, _is_lazy(v),
-                                                    int(np.prod(v.shape)), paraview),
+                                                    int(np.prod(v.shape)), paraview, name),
                       force=force, wait=wait) for v in volumes]
 
 
@@ -202,7 +204,8 @@ def segment_files(volumes, out_dir, *, force=False, wait=False, persistence_plot
     if note:
         say(note)
     sets = output_sets(volumes, out_dir, force=force, wait=wait,
-                       persistence_plot=persistence_plot, paraview=paraview)
+                       persistence_plot=persistence_plot, paraview=paraview,
+                       field=options.get("field", "curvature"))
     summaries = []
     with ExitStack() as stack:
         for outputs in sets:
@@ -248,7 +251,7 @@ def segment_to_files(volume, outputs, *, operator="weighted", n_regions=None,
                      min_persistence=None, value_scale=None, noise=None, seed=0, mask=None,
                      smooth_sigma=None, padding="linear", measure=None, threshold=None,
                      min_component=None, labels_into_input=None, ome_level=None, engine=None,
-                     say=_quiet) -> dict:
+                     field="curvature", say=_quiet) -> dict:
     """Segment `volume` and write its output set (an entered `OutputSet` named by
     `output_names`); returns the summary. A lazily read volume (its data a Dask
     array) takes the blockwise path: each stage stored in the set's staging files and
@@ -274,7 +277,7 @@ def segment_to_files(volume, outputs, *, operator="weighted", n_regions=None,
         operator=operator, min_persistence=min_persistence, n_regions=n_regions,
         value_scale=value_scale, spacing=volume.spacing, padding=padding, mask=mask,
         smooth_sigma=smooth_sigma, measure=measure, threshold=threshold,
-        min_component=min_component, dtype=dtype)
+        min_component=min_component, dtype=dtype, field=field)
     read_as = _file_states(volume.files)      # before the checksum reads them
     name, checksum = volume.name, files_sha256(volume.files)
     done = {}
@@ -284,7 +287,9 @@ def segment_to_files(volume, outputs, *, operator="weighted", n_regions=None,
         if lazy:       # removed with the commit, or by the next run that finishes it
             outputs.discard = [storage.work_folder]
         blocks = f" in {storage.chunks} blocks" if lazy else ""
-        say(f"{name}: curvature ({request.operator.name}) and Morse complex of a "
+        what = (f"curvature ({request.operator.name})" if request.field.needs_scale
+                else request.field.label)
+        say(f"{name}: {what} and Morse complex of a "
             f"{'x'.join(map(str, data.shape))} volume{blocks}")
         result, value_range = _stages_saying_warnings(data, request, storage, name, say,
                                                       str(volume.path or name))

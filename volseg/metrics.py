@@ -20,6 +20,7 @@ __all__ = [
     "hamming_similarity",
     "region_ratio",
     "variation_of_information",
+    "adjusted_rand_index",
 ]
 
 
@@ -148,6 +149,26 @@ def _variation_of_information(table) -> float:
     return float(max(entropy(pa) + entropy(pb) - 2 * mutual, 0.0))
 
 
+def adjusted_rand_index(a: ArrayLike, b: ArrayLike) -> float:
+    """Hubert and Arabie's adjusted Rand index of two segmentations: 1 when identical
+    up to relabelling, about 0 for independent ones (the score ground-truth
+    benchmarks report beside the variation of information)."""
+    return _adjusted_rand(contingency_table(a, b))
+
+
+def _adjusted_rand(table) -> float:
+    def pairs(counts):
+        counts = np.asarray(counts, dtype=np.float64)
+        return float(np.sum(counts * (counts - 1) / 2))
+
+    n = float(table.sum())
+    both = pairs(table.tocoo().data)
+    rows, cols = pairs(table.sum(axis=1)), pairs(table.sum(axis=0))
+    expected = rows * cols / (n * (n - 1) / 2) if n > 1 else 0.0
+    top = (rows + cols) / 2 - expected
+    return 1.0 if top == 0 else float((both - expected) / top)
+
+
 def compare(a: ArrayLike, b: ArrayLike, *, mask: ArrayLike | None = None) -> dict:
     """Every score of `a` against `b` from one contingency table (4x cheaper than
     calling the functions one by one).
@@ -166,6 +187,7 @@ def compare(a: ArrayLike, b: ArrayLike, *, mask: ArrayLike | None = None) -> dic
     dict
         ``hamming_similarity``, ``directional_hamming_a_to_b`` (D_H(A => B), voxels),
         ``directional_hamming_b_to_a``, ``region_ratio``, ``variation_of_information``,
+        ``adjusted_rand_index``,
         ``regions_a``, ``regions_b``, ``voxels`` (how many were scored).
     """
     if mask is not None:
@@ -189,6 +211,7 @@ def compare(a: ArrayLike, b: ArrayLike, *, mask: ArrayLike | None = None) -> dic
         "directional_hamming_b_to_a": b_to_a,
         "region_ratio": min(ka, kb) / max(ka, kb),
         "variation_of_information": _variation_of_information(table),
+        "adjusted_rand_index": _adjusted_rand(table),
         "regions_a": ka,
         "regions_b": kb,
         "voxels": n,

@@ -26,10 +26,10 @@ from ._smoothing import gaussian, noise_sigma
 from .curvature import (
     Operator,
     check_padding,
-    checked_grid_curvature,
     default_value_scale,
     get_operator,
 )
+from .fields import FIELD_REGISTRY, Field, field_entry, for_morse
 from .masks import MaskChoice, check_rule, foreground_mask
 from .morse import (
     PERSISTENCE,
@@ -110,6 +110,10 @@ class Segmentation:
         A mesh's rounds of 1-ring averaging of the curvature (0: none).
     padding : str or None
         A volume's padding rule at the grid's boundary (`grid_curvature`).
+    field : str
+        The field the complex was built on (`volseg.fields.FIELD_REGISTRY`, or
+        ``"given"``); `curvature` holds that field (the gradient magnitude for
+        ``"gradient"``, ...).
     """
 
     labels: NDArray[np.int32]
@@ -126,6 +130,7 @@ class Segmentation:
     smooth_sigma: float = 0.0
     smooth_rounds: int = 0
     padding: str | None = None
+    field: str = "curvature"
     vertices: NDArray[np.float64] | None = None
     simplices: NDArray[np.intp] | None = None
     measure: str = PERSISTENCE.name
@@ -289,14 +294,18 @@ class SegmentRequest:
     smooth_rule: str = "given"
     dtype: np.dtype | None = None
     chunks: int | None = None
+    field: Field = FIELD_REGISTRY["curvature"]
 
     @classmethod
     def checked(cls, *, operator="weighted", min_persistence=None, n_regions=None,
                 value_scale=None, spacing=None, default_spacing=(1.0, 1.0, 1.0),
                 padding="linear", mask=None, smooth_sigma=0.0, measure=None,
                 threshold=None, min_component=None, dtype=None,
-                chunks=None) -> SegmentRequest:
+                chunks=None, field="curvature") -> SegmentRequest:
         """The request with every option checked; a ValueError names the option."""
+        entry = field_entry(field)
+        if measure is None and min_persistence is None:
+            measure = entry.measure
         cut = CutRequest.checked(
             min_persistence, n_regions, threshold=threshold, measure=measure,
             min_component=DEFAULT_MIN_COMPONENT if min_component is None else min_component)
@@ -308,7 +317,7 @@ class SegmentRequest:
                    _validate.spacing(spacing, default_spacing), check_padding(padding), mask,
                    sigma, "given" if sigma is not None else "auto",
                    None if dtype is None else np.dtype(dtype),
-                   None if chunks is None else _validate.chunk_edge(chunks))
+                   None if chunks is None else _validate.chunk_edge(chunks), entry)
 
     def with_smoothing(self, data, mask, lattice=None) -> SegmentRequest:
         """The request with its smoothing resolved: `auto_smoothing` of `data` inside
@@ -430,23 +439,35 @@ def run_stages(data, request: SegmentRequest, storage: Storage | None = None, *,
     storage.begin(choice, request)
     hooks = storage.block_hooks       # set by `begin` (the blockwise work folder's)
     timings = {}
+    entry = request.field
     with _timed(timings, "curvature", storage):
         values = storage.smoothed(gaussian(data, request.smooth_sigma))
         scale = request.value_scale
-        if scale is None:
+        if scale is None and entry.needs_scale:
             scale = _default_scale(values, request, shifted_range, source)
-        curvature = storage.curvature(checked_grid_curvature(
-            values, request.operator, request.spacing, scale, request.padding,
-            block_hooks=hooks))
+        field = storage.curvature(_checked_given(
+            entry.make(values, shifted_range, request, scale, hooks), data, source))
     hierarchy, labels, report = _morse_and_cut(
-        curvature, request.cut, timings, mask=choice.mask, storage=storage,
+        for_morse(entry, field), request.cut, timings, mask=choice.mask, storage=storage,
         vertex_weight=float(np.prod(request.spacing)))
-    result = Segmentation(labels, curvature, hierarchy, operator=request.operator.name,
+    result = Segmentation(labels, field, hierarchy, operator=request.operator.name,
                           value_scale=scale, spacing=request.spacing, timings=timings,
                           mask=choice, smooth_sigma=request.smooth_sigma,
                           smooth_rule=request.smooth_rule, padding=request.padding,
-                          **_cut_fields(report))
+                          field=entry.name, **_cut_fields(report))
     return result, value_range
+
+
+def _checked_given(field, data, source):
+    """A field (made, or given by the user) of the volume's shape, float64, finite."""
+    if field.shape != data.shape:
+        raise ValueError(f"`field` must have the volume's shape {data.shape}, got {field.shape}")
+    if _validate.is_lazy(field):
+        return field.astype(np.float64)
+    field = np.asarray(field, dtype=np.float64)
+    if not np.isfinite(field).all():
+        raise ValueError(f"the field of {source} holds NaN or infinite values")
+    return field
 
 
 def _morse_and_cut(field, cut: CutRequest, timings, *, mask=None, adjacency=None,
@@ -554,9 +575,11 @@ def segment_volume(
     measure: str | None = None,
     threshold: float | None = None,
     min_component: float | None = None,
+    field="curvature",
     progress=None,
 ) -> Segmentation:
-    """Segment a volume by the descending Morse complex of its mean curvature.
+    """Segment a volume by the descending Morse complex of its mean curvature (or of
+    another field: its gradient magnitude, its values).
 
     Segment centres sit at maxima of the curvature field (peaks of a density),
     boundaries in its valleys (docs/design.md section 2).
@@ -605,6 +628,13 @@ def segment_volume(
         With a mask: its connected components (in the Morse graph's connectivity)
         holding less than this share of the masked voxels are labelled 0 and take
         no region of `n_regions` (default `DEFAULT_MIN_COMPONENT`; 0 keeps all).
+    field : {'curvature', 'gradient', 'value'} or (X, Y, Z) array_like
+        The field the complex is built on (docs/design.md section 13,
+        `volseg.fields.FIELD_REGISTRY`): the paper's mean curvature (territories around
+        its peaks); ``'gradient'``, the basins of the gradient magnitude (regions
+        bounded by edges: a watershed hierarchy); ``'value'``, bright blobs of the
+        values; or an array of the volume's shape (numpy or Dask), built on as it is.
+        Its default measure applies when `measure` is not given.
     progress : callable, optional
         Called with a line as each stage starts (and the seconds the one before
         took). An exception it raises stops the run there: how a viewer cancels.
@@ -662,7 +692,7 @@ def segment_volume(
         value_scale=value_scale, spacing=spacing,
         default_spacing=getattr(volume, "spacing", (1.0, 1.0, 1.0)), padding=padding, mask=mask,
         smooth_sigma=smooth_sigma, measure=measure, threshold=threshold,
-        min_component=min_component, dtype=data.dtype)
+        min_component=min_component, dtype=data.dtype, field=field)
     return run_stages(data, request, InMemory(say=progress))[0]
 
 

@@ -43,6 +43,7 @@ import numpy as np
 from .. import __version__
 from .._block_hooks import BlockHooks
 from ..errors import OutputError
+from ..fields import GIVEN
 from ..io import Frame, read_zarr, write_zarr
 from ..segment import Storage
 from ._resume import WorkFolder
@@ -102,6 +103,7 @@ class BlockwiseStorage(Storage):
             "operator": request.operator.name, "value_scale": request.value_scale,
             "padding": request.padding, "connectivity": "kuhn",
             "smooth": request.smooth_sigma, "mask": choice.used,
+            "field": _field_key(request.field),
             # 3: ascent ends kept; 4: one stage sequence; 5: forests with faces;
             # 6: the ascent's blocks with their range
             "block_layout": 6})
@@ -157,6 +159,16 @@ class BlockwiseStorage(Storage):
         """The set is committed: the finished blocks are no longer needed."""
         if self.work is not None:
             self.work.remove()
+
+
+def _field_key(entry) -> str:
+    """What identifies the field in the work folder's key: its name, and for a field
+    the user gave, dask's token of its array (its file and chunks, or its bytes)."""
+    if entry.name != GIVEN:
+        return entry.name
+    from dask.base import tokenize
+
+    return f"{GIVEN}:{tokenize(entry.make(None, None, None, None, None))}"
 
 
 def _check_disk(folder, work_folder, voxels: int, smooth: float, say, paraview=False):

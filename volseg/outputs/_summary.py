@@ -45,22 +45,25 @@ PARAVIEW_VOXELS = 256**3
 
 
 def output_names(stem: str, persistence_plot: bool = False, blockwise: bool = False,
-                 voxels: int | None = None, paraview: bool | None = None) -> dict:
+                 voxels: int | None = None, paraview: bool | None = None,
+                 field: str = "curvature") -> dict:
     """Kind -> file name of the outputs of `stem` (with ``<stem>_persistence.png``
     when `persistence_plot`; labels and curvature as ``.zarr`` when `blockwise`, and
     also as NIfTI when the volume's `voxels` are given and at most
     `BLOCKWISE_NIFTI_VOXELS`; the OME-Zarr image ``<stem>_segmentation.ome.zarr``; the ParaView
     image ``<stem>_volumes.vti`` when `paraview`, or by default when `voxels` are
     unknown or at most `PARAVIEW_VOXELS`)."""
-    names = {kind: stem + suffix for kind, suffix in OUTPUT_SUFFIXES.items()}
+    names = {kind: stem + suffix.replace("curvature", field)
+             for kind, suffix in OUTPUT_SUFFIXES.items()}
     names["ngff"] = stem + NGFF_SUFFIX
     if paraview or (paraview is None and (voxels is None or voxels <= PARAVIEW_VOXELS)):
         names["paraview"] = stem + PARAVIEW_SUFFIX
     if blockwise:
         if voxels is not None and voxels <= BLOCKWISE_NIFTI_VOXELS:
-            names.update({f"{kind}_nifti": stem + OUTPUT_SUFFIXES[kind]
+            names.update({f"{kind}_nifti": stem + OUTPUT_SUFFIXES[kind].replace("curvature", field)
                           for kind in BLOCKWISE_SUFFIXES})
-        names.update({kind: stem + suffix for kind, suffix in BLOCKWISE_SUFFIXES.items()})
+        names.update({kind: stem + suffix.replace("curvature", field)
+                      for kind, suffix in BLOCKWISE_SUFFIXES.items()})
     if persistence_plot:
         names["persistence"] = f"{stem}_persistence.png"
     return names
@@ -102,6 +105,7 @@ def result_summary(result) -> dict:
     regions = result.region_table()
     measure = result.measure
     return {
+        "field": getattr(result, "field", "curvature"),
         "operator": result.operator,
         "n_regions": result.n_regions,
         "cut": f"auto: the largest {measure} gap for 20-40 regions" if result.cut.get("auto")

@@ -1,0 +1,162 @@
+"""The scalar field the Morse complex is built on: a registry (docs/design.md section 13).
+
+Every field runs through the same machinery (the hierarchy, every measure, the
+blockwise path, the outputs); an entry says how the field is made from the (smoothed)
+volume, whether the complex is built on it or on its negative, and which cut measure
+suits it:
+
+- ``curvature``: the paper's mean curvature of the volume's graph in R^4; regions are
+  territories around curvature peaks;
+- ``gradient``: the gradient magnitude |grad f| (central differences with the voxel
+  spacing, one-sided at the border) of the volume normalised to its range; the complex
+  is built on -|grad f|, so regions are the basins of the gradient, bounded by edges:
+  a watershed hierarchy (by dynamics, area or volume as in higra);
+- ``value``: the volume itself, normalised to its range; regions are bright blobs (on a
+  map of both signs, |f|: bright and dark blobs alike).
+
+A field the user computed (an array of the volume's shape) is given as
+``segment_volume(field=array)``; the complex is built on it as it is.
+
+Examples
+--------
+>>> from volseg.fields import FIELD_REGISTRY, get_field
+>>> list(FIELD_REGISTRY)
+['curvature', 'gradient', 'value']
+>>> get_field("edges").name, get_field("gradient").sign
+('gradient', -1.0)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from . import _validate
+from ._registry import Registry
+
+__all__ = ["Field", "FIELD_REGISTRY", "FIELDS", "get_field", "field_entry", "given",
+           "for_morse", "gradient_magnitude", "normalised", "GIVEN"]
+
+
+@dataclass(frozen=True)
+class Field:
+    """A field the Morse complex can be built on.
+
+    `make(values, span, request, scale, hooks)` gives the field as a user sees it
+    (numpy in, numpy out; Dask in, lazy Dask out, equal to numpy's exactly); the
+    complex is built on ``sign * field``. `halo`: the voxels of halo a block needs.
+    `needs_scale`: the field reads the graph's value scale (the curvature). `measure`:
+    the cut measure by default (`volseg.morse.MEASURE_REGISTRY`), chosen by measurement
+    (docs/guide/useful-regions.md).
+    """
+
+    name: str
+    label: str
+    aliases: tuple[str, ...]
+    make: Callable
+    sign: float
+    halo: int
+    needs_scale: bool
+    measure: str
+    summary: str
+
+
+def normalised(values, span):
+    """`values` minus their minimum over their range (the input's (min, max) `span`):
+    0..1, the same for every exactly scaled or offset copy of a volume."""
+    low, high = (float(v) for v in span)
+    width = high - low if high > low else 1.0
+    if _validate.is_lazy(values):
+        return values.map_blocks(_normalised_block, low, width, dtype=np.float64)
+    return _normalised_block(np.asarray(values), low, width)
+
+
+def _normalised_block(block, low, width):
+    return (block.astype(np.float64) - low) / width
+
+
+def gradient_magnitude(values, spacing):
+    """(X, Y, Z) |grad f| of `values` with the voxel `spacing`: central differences
+    inside, one-sided at the volume's border (`numpy.gradient`); a Dask array block by
+    block with a one-voxel halo (none past the border), equal to numpy's exactly."""
+    spacing = tuple(float(s) for s in spacing)
+    if _validate.is_lazy(values):
+        return values.map_overlap(_gradient_block, depth=1, boundary="none",
+                                  dtype=np.float64, spacing=spacing)
+    return _gradient_block(np.asarray(values, dtype=np.float64), spacing=spacing)
+
+
+def _gradient_block(block, spacing):
+    block = np.asarray(block, dtype=np.float64)
+    squares = np.zeros(block.shape)
+    for axis, step in enumerate(spacing):
+        if block.shape[axis] > 1:
+            squares += np.gradient(block, step, axis=axis) ** 2
+    return np.sqrt(squares)
+
+
+def _curvature(values, span, request, scale, hooks):
+    from .curvature import checked_grid_curvature
+
+    return checked_grid_curvature(values, request.operator, request.spacing, scale,
+                                  request.padding, block_hooks=hooks)
+
+
+def _gradient(values, span, request, scale, hooks):
+    return gradient_magnitude(normalised(values, span), request.spacing)
+
+
+def _value(values, span, request, scale, hooks):
+    low, high = (float(v) for v in span)
+    if low < 0 < high:                      # a signed map: bright and dark blobs
+        field = abs(values) if _validate.is_lazy(values) else np.abs(values)
+        return normalised(field, (0.0, max(-low, high)))
+    return normalised(values, span)
+
+
+FIELD_REGISTRY = Registry("field", [
+    Field("curvature", "curvature", ("mean-curvature",), _curvature, 1.0, 1, True,
+          "hypervolume", "mean curvature of the graph in R^4: territories around peaks"),
+    Field("gradient", "gradient magnitude", ("edges", "watershed"), _gradient, -1.0, 1,
+          False, "hypervolume", "basins of |grad f|: regions bounded by edges"),
+    Field("value", "value", ("intensity", "blobs"), _value, 1.0, 0, False, "hypervolume",
+          "the values: regions around bright blobs (|f| on a signed map)"),
+])
+#: The registered fields' names.
+FIELDS = tuple(FIELD_REGISTRY)
+#: What a field given as an array is called in summaries.
+GIVEN = "given"
+
+
+def get_field(field: str | Field) -> Field:
+    """The registry entry of a field name or alias."""
+    return FIELD_REGISTRY[field]
+
+
+def given(array) -> Field:
+    """The entry of a field the user computed: the complex built on `array` itself."""
+    def make(values, span, request, scale, hooks):
+        return array
+
+    return Field(GIVEN, "given field", (), make, 1.0, 0, False, "hypervolume",
+                 "a field given as an array of the volume's shape")
+
+
+def field_entry(field) -> Field:
+    """The entry of `field`: a registered name or alias, an entry, or an array (`given`)."""
+    if isinstance(field, str | Field):
+        return get_field(field)
+    if not (_validate.is_lazy(field) or hasattr(field, "__array__")
+            or isinstance(field, list | tuple)):
+        raise ValueError(f"`field` must be one of {', '.join(FIELDS)} or an array of the "
+                         f"volume's shape, got {type(field).__name__}")
+    return given(field if _validate.is_lazy(field) else np.asarray(field))
+
+
+def for_morse(entry: Field, field):
+    """The array the complex is built on: ``entry.sign * field``, lazily for Dask."""
+    if entry.sign > 0:
+        return field
+    return -field
