@@ -30,13 +30,14 @@ import sqlite3
 import sys
 import time
 import uuid
+import warnings
 import zlib
 from pathlib import Path
 
 import numpy as np
 
 from volseg.curvature import REGISTRY, cli_choices, normalize_operator
-from volseg.errors import UsageError
+from volseg.errors import UsageError, VolsegWarning
 from volseg.segment import DEFAULT_REGIONS
 
 from ._output import save_figure, write_csv
@@ -90,8 +91,12 @@ def clean_reference(volume, operator, regions, mask="none", threads=1):
 
     _single_threaded(threads)
     # The paper's cut: persistence, no pre-smoothing (volseg's defaults for scans differ).
-    clean = segment_volume(np.asarray(volume, dtype=np.float64), operator=operator,
-                           n_regions=regions, mask=mask, measure="persistence", smooth_sigma=0)
+    # Such a cut may be degenerate; the table reports its spread, so no warning here.
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", VolsegWarning)
+        clean = segment_volume(np.asarray(volume, dtype=np.float64), operator=operator,
+                               n_regions=regions, mask=mask, measure="persistence",
+                               smooth_sigma=0)
     data = np.asarray(volume)
     return {"threshold": clean.min_persistence, "value_scale": clean.value_scale,
             "n_regions": clean.n_regions, "labels": clean.labels, "mask": clean.mask.mask,
@@ -139,8 +144,11 @@ def run_task(task, volume, reference, threads=1):
     cut = ({"n_regions": reference["n_regions"]} if task.get("cut") == "regions"
            else {"min_persistence": reference["threshold"]})
     mask = reference["mask"]
-    result = segment_volume(data, operator=task["operator"], value_scale=reference["value_scale"],
-                            mask=mask, measure="persistence", smooth_sigma=0, **cut)
+    with warnings.catch_warnings():          # the paper's cut, its spread in the table
+        warnings.simplefilter("ignore", VolsegWarning)
+        result = segment_volume(data, operator=task["operator"],
+                                value_scale=reference["value_scale"], mask=mask,
+                                measure="persistence", smooth_sigma=0, **cut)
     clean = reference["labels"]
     scores = compare(clean, result.labels, mask=mask)  # a masked run scores its foreground
     # Plateaus (fuel and neghip are about half exact zeros) have zero curvature, so

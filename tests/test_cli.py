@@ -249,8 +249,11 @@ def test_first_run_note_and_in_memory_stage_progress(tmp_path, capsys, monkeypat
     monkeypatch.setattr(_jit_cache, "uncompiled", lambda kernels: [])
     assert main(["segment", str(source), "-o", str(tmp_path / "b"), "--regions", "2"]) == 0
     assert "compiling" not in capsys.readouterr().err
-    assert main(["segment", str(source), "-o", str(tmp_path / "c"), "-q"]) == 0
+    assert main(["segment", str(source), "-o", str(tmp_path / "c"), "-q", "--regions", "2"]) == 0
     assert capsys.readouterr().err == ""
+    # -q silences progress, not warnings: 30 regions of a volume of fewer maxima.
+    assert main(["segment", str(source), "-o", str(tmp_path / "d"), "-q"]) == 0
+    assert capsys.readouterr().err.startswith("volseg: warning: v: asked for 30 regions")
 
 
 @pytest.mark.parametrize("argv, message", [
@@ -272,3 +275,21 @@ def test_a_bad_option_is_refused_before_the_input_is_opened(tmp_path, capsys, mo
     err = capsys.readouterr().err
     assert message in err and err.count("\n") == 1, err
     assert opened == [] and not out.exists()
+
+
+def test_a_degenerate_cut_is_a_warning_from_the_api_and_a_line_even_with_q(tmp_path, capsys,
+                                                                          volvis_dir):
+    """One region of nearly everything (the unsmoothed tooth cut by persistence: its
+    tallest curvature peaks are voxel-sized spikes): `segment_volume` gives a
+    VolsegWarning, the command line one stderr line 'volseg: warning:' even with -q."""
+    from volseg import read_volume, segment_volume
+    from volseg.errors import VolsegWarning
+
+    tooth = volvis_dir / "tooth_103x94x161_uint8.raw"
+    with pytest.warns(VolsegWarning, match="largest of 30 regions holds"):
+        segment_volume(read_volume(tooth), measure="persistence", smooth_sigma=0)
+    assert main(["segment", str(tooth), "-o", str(tmp_path / "o"), "-q",
+                 "--measure", "persistence", "--smooth", "0"]) == 0
+    err = capsys.readouterr().err
+    lines = [line for line in err.splitlines() if line.startswith("volseg: warning:")]
+    assert len(lines) == 1 and "largest of 30" in lines[0], err

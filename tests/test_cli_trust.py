@@ -114,7 +114,7 @@ def test_existing_outputs_of_any_input_are_refused_up_front(tmp_path, capsys):
     a = _raw(tmp_path / "a_12x10x8_uint8.raw", _blob())
     b = _raw(tmp_path / "b_12x10x8_uint8.raw", _blob()[::-1].copy())
     out = tmp_path / "out"
-    assert main(["segment", str(b), "-o", str(out), "-q"]) == 0
+    assert main(["segment", str(b), "-o", str(out), "-q", "--regions", "1"]) == 0
     before = _snapshot(out)
     assert main(["segment", str(a), str(b), "-o", str(out), "-q"]) == 2
     assert "b_labels.nii.gz exists" in _one_clean_line(capsys.readouterr().err)
@@ -359,7 +359,8 @@ def test_an_input_rewritten_during_the_run_is_refused_and_nothing_written(tmp_pa
         return result
 
     monkeypatch.setattr(files, "run_stages", rewritten)
-    assert main(["segment", str(source), "-o", str(tmp_path / "out"), "-q"]) == 2
+    assert main(["segment", str(source), "-o", str(tmp_path / "out"), "-q", "--regions",
+                 "1"]) == 2
     line = _one_clean_line(capsys.readouterr().err)
     assert "changed while volseg read it" in line and source.name in line
     assert _visible(tmp_path / "out") == []

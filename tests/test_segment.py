@@ -239,3 +239,31 @@ def test_recut_equals_a_fresh_segmentation_and_reuses_a_buffer():
         base.region(10)
     with pytest.raises(ValueError, match="`out`"):
         base.recut(3, out=np.zeros(5, np.int32))
+
+
+def test_a_nibabel_image_segments_as_the_command_line_segments_its_file(tmp_path, capsys):
+    """`segment_volume(nib.load(f))` keeps the file's anisotropic voxels and scaling, and
+    equals `volseg segment f`; the bare array (every voxel a unit cube) does not."""
+    import json
+
+    import nibabel as nib
+
+    from volseg.cli import main
+
+    data = np.asarray(demo_volume(24).data, dtype=np.int16)
+    affine = np.diag([0.7, 0.7, 3.0, 1.0])
+    image = nib.Nifti1Image(data, affine)
+    image.header.set_xyzt_units("mm")
+    image.header.set_slope_inter(0.5, 10.0)
+    path = tmp_path / "aniso.nii.gz"
+    nib.save(image, path)
+    loaded = nib.load(path)
+    result = segment_volume(loaded, n_regions=8)
+    assert result.spacing == (pytest.approx(0.7), pytest.approx(0.7), pytest.approx(3.0))
+    assert main(["segment", str(path), "-o", str(tmp_path / "o"), "-q", "--regions", "8"]) == 0
+    written = np.asarray(nib.load(tmp_path / "o" / "aniso_labels.nii.gz").dataobj)
+    np.testing.assert_array_equal(written, result.labels)
+    bare = segment_volume(loaded.get_fdata(), n_regions=8)
+    assert bare.spacing == (1.0, 1.0, 1.0) and (bare.labels != result.labels).any()
+    capsys.readouterr()
+    assert json.dumps(result.spacing)

@@ -521,6 +521,8 @@ def _quiet_readers():
     import logging
     import warnings
 
+    from .errors import VolsegWarning
+
     logger = logging.getLogger("nibabel")
     level = logger.level
     logger.setLevel(logging.CRITICAL)
@@ -528,7 +530,22 @@ def _quiet_readers():
         with warnings.catch_warnings():
             for module in ("nibabel", "zarr", "numcodecs", "ome_zarr"):
                 warnings.filterwarnings("ignore", module=module + r"(\..*)?")
-            yield
+            # volseg's own warnings (a degenerate cut, fewer maxima than regions): one
+            # line on stderr each, even with -q, never Python's two-line form.
+            warnings.simplefilter("always", VolsegWarning)
+            shown = warnings.showwarning
+
+            def one_line(message, category, *args, **kwargs):
+                if issubclass(category, VolsegWarning):
+                    print(f"volseg: warning: {message}", file=sys.stderr, flush=True)
+                else:
+                    shown(message, category, *args, **kwargs)
+
+            warnings.showwarning = one_line
+            try:
+                yield
+            finally:
+                warnings.showwarning = shown
     finally:
         logger.setLevel(level)
 

@@ -27,7 +27,7 @@ import numpy as np
 from . import _validate
 from ._jit_cache import first_run_note
 from .curvature import entry_kernels as curvature_kernels
-from .errors import UsageError
+from .errors import UsageError, VolsegWarning
 from .fields import field_entry
 from .io import Frame, OutputSet
 from .morse import entry_kernels as morse_kernels
@@ -361,7 +361,7 @@ def _write_result(paths, volume, result, data, value_range, outputs, *, checksum
     info["outputs"] = {kind: str(path) for kind, path in outputs.targets.items()}
     warning = degenerate_cut_warning(name, result, info["spread"], data.dtype)
     if warning:
-        say(warning)
+        warnings.warn(warning, VolsegWarning, stacklevel=2)
     write_result_files(paths, result, data, info, frame=frame,
                        title=result_title(name, result, blockwise=blockwise is not None,
                                           spread=info["spread"]),
@@ -370,14 +370,15 @@ def _write_result(paths, volume, result, data, value_range, outputs, *, checksum
 
 
 def _stages_saying_warnings(data, request, storage, name, say, source):
-    """`run_stages`, its UserWarnings (fewer maxima than asked, ...) said as one line
-    each rather than printed by Python with their source line."""
+    """`run_stages`, its warnings (fewer maxima than asked, ...) given again as
+    `VolsegWarning`s naming the input (the command line prints each as one line, even
+    with -q)."""
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", UserWarning)
         out = run_stages(data, request, storage, source=source)
     for warning in caught:
         if issubclass(warning.category, UserWarning):
-            say(f"{name}: warning: {warning.message}")
+            warnings.warn(f"{name}: {warning.message}", VolsegWarning, stacklevel=2)
         else:
             warnings.warn_explicit(warning.message, warning.category, warning.filename,
                                    warning.lineno)

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+import warnings
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 
@@ -29,6 +30,7 @@ from .curvature import (
     default_value_scale,
     get_operator,
 )
+from .errors import VolsegWarning
 from .fields import FIELD_REGISTRY, Field, field_entry, for_morse
 from .masks import MaskChoice, check_rule, foreground_mask
 from .morse import (
@@ -586,9 +588,13 @@ def segment_volume(
 
     Parameters
     ----------
-    volume : (X, Y, Z) array_like, Dask array, or Volume
+    volume : (X, Y, Z) array_like, Dask array, Volume, nibabel or SimpleITK image
         A Dask array is segmented block by block (docs/design.md section 10); the
-        labels, curvature and mask come back as lazy Dask arrays.
+        labels, curvature and mask come back as lazy Dask arrays. A `Volume` or an
+        image (``nibabel.load(path)``, ``SimpleITK.ReadImage(path)``) brings its voxel
+        spacing; a bare array has none (every voxel a unit cube) unless `spacing` is
+        given: pass the image, not ``image.get_fdata()``, to segment anisotropic
+        voxels as they are.
     operator : {'weighted', 'unweighted', 'laplace_beltrami', 'intrinsic'}
     min_persistence : float, optional
         Cut the hierarchy at this persistence threshold.
@@ -684,6 +690,10 @@ def segment_volume(
     >>> int(result.labels[4, 12, 12]) != int(result.labels[19, 12, 12])   # one blob each
     True
     """
+    if _is_image(volume):
+        from .io import volume_of_image
+
+        volume = volume_of_image(volume)
     data = getattr(volume, "data", volume)
     lazy = _validate.is_lazy(data)
     data = _validate.lazy_volume_array(data) if lazy else _validate.volume_array(volume)
@@ -693,7 +703,30 @@ def segment_volume(
         default_spacing=getattr(volume, "spacing", (1.0, 1.0, 1.0)), padding=padding, mask=mask,
         smooth_sigma=smooth_sigma, measure=measure, threshold=threshold,
         min_component=min_component, dtype=data.dtype, field=field)
-    return run_stages(data, request, InMemory(say=progress))[0]
+    result = run_stages(data, request, InMemory(say=progress))[0]
+    if not lazy:
+        _warn_if_degenerate(result, data.dtype)
+    return result
+
+
+def _warn_if_degenerate(result: Segmentation, dtype) -> None:
+    """A `VolsegWarning` when the cut is degenerate (one region of nearly everything and
+    specks: docs/design.md section 12), naming the likely cause and its fix."""
+    from .metrics import region_spread
+    from .outputs import degenerate_cut_warning
+
+    sizes = np.bincount(np.asarray(result.labels).ravel())[1:]
+    if sizes.sum() == 0:
+        return
+    line = degenerate_cut_warning("the volume", result, region_spread(sizes), dtype)
+    if line:
+        warnings.warn(line, VolsegWarning, stacklevel=3)
+
+
+def _is_image(volume) -> bool:
+    """Whether `volume` is a nibabel or SimpleITK image (it carries its geometry)."""
+    return (hasattr(volume, "affine") and hasattr(volume, "dataobj")) or (
+        hasattr(volume, "GetSpacing") and hasattr(volume, "GetDirection"))
 
 
 def segment_mesh(

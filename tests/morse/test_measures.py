@@ -3,12 +3,14 @@ naive one on the whole cell graph, the measures against their definitions, block
 equal to in memory, persistence unchanged, small mask components dropped."""
 
 import hashlib
+import warnings
 
 import dask.array as da
 import numpy as np
 import pytest
 from scipy import ndimage
 
+from volseg.errors import VolsegWarning
 from volseg.morse import descending_complex, grid_offsets
 
 
@@ -223,7 +225,10 @@ def test_persistence_without_smoothing_or_mask_gives_the_labels_of_before(volvis
 
     for name, digest in BEFORE_MEASURES.items():
         volume = load_volume(str(next(volvis_dir.glob(f"{name}_*.raw"))))
-        labels = segment_volume(volume, measure="persistence", smooth_sigma=0, mask=None).labels
+        with warnings.catch_warnings():           # some of these cuts are degenerate
+            warnings.simplefilter("ignore", VolsegWarning)
+            labels = segment_volume(volume, measure="persistence", smooth_sigma=0,
+                                    mask=None).labels
         got = hashlib.sha256(np.ascontiguousarray(labels, dtype=np.int32).tobytes()).hexdigest()
         assert got[:16] == digest, name
 

@@ -12,12 +12,13 @@ input's frame, and the all-or-nothing writer of a result's output files.
 
 from .ngff import write_ngff
 from .output_set import FolderLock, OutputError, OutputSet, recover
-from .readers import DTYPES, read_volume
+from .readers import DTYPES, read_volume, volume_of_image
 from .volume import Frame, Volume, VolumeFileError
 from .vtk_image import write_vti
 from .writers import atomic_path, write_volume
 from .zarr_store import read_zarr, write_zarr
 
-__all__ = ["Volume", "Frame", "VolumeFileError", "read_volume", "write_volume", "atomic_path",
+__all__ = ["Volume", "Frame", "VolumeFileError", "read_volume", "volume_of_image", "write_volume",
+           "atomic_path",
            "OutputSet", "OutputError", "FolderLock", "recover", "DTYPES", "read_zarr",
            "write_zarr", "write_vti", "write_ngff"]

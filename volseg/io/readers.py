@@ -261,6 +261,33 @@ def _read_nrrd(path: Path, shape, dtype, byte_order, allow_external, mapped=Fals
             f"NRRD {encoding} {dt.name}", files)
 
 
+def volume_of_image(image, name: str = "volume") -> Volume:
+    """The `Volume` of an image another library holds, with its geometry: a nibabel
+    image (its data as ``nibabel.load(f).dataobj`` scales them, its sform or qform and
+    unit, as `read_volume` of the file gives) or a SimpleITK image (ITK's LPS frame in
+    RAS+, millimetres)."""
+    if hasattr(image, "affine") and hasattr(image, "dataobj"):
+        return Volume(np.asanyarray(image.dataobj), frame=nifti_frame(image), name=name)
+    if hasattr(image, "GetSpacing") and hasattr(image, "GetDirection"):
+        from .readers_more import sitk_image_arrays
+
+        data, frame = sitk_image_arrays(image)
+        return Volume(data, frame=frame, name=name)
+    raise TypeError(f"not a nibabel or SimpleITK image: {type(image).__name__}")
+
+
+def nifti_frame(image) -> Frame:
+    """The `Frame` of a nibabel image: its affine (sform where coded, else qform),
+    both codes, the qform where it differs, the length unit."""
+    sform, sform_code = image.header.get_sform(coded=True)
+    qform, qform_code = image.header.get_qform(coded=True)
+    affine = image.affine
+    same = qform is None or np.allclose(qform, affine, atol=1e-6)
+    return Frame(affine, sform_code=int(sform_code), qform_code=int(qform_code),
+                 qform=None if same else qform,
+                 unit=length_unit(image.header.get_xyzt_units()[0]))
+
+
 def _read_nifti(path: Path, shape, dtype, byte_order, allow_external, mapped=False):
     import nibabel
 
@@ -294,17 +321,11 @@ def _read_nifti(path: Path, shape, dtype, byte_order, allow_external, mapped=Fal
             _check_nifti_extensions(path, handle.read(offset), offset, header.endianness)
     try:
         data = np.asanyarray(image.dataobj)
-        sform, sform_code = image.header.get_sform(coded=True)
-        qform, qform_code = image.header.get_qform(coded=True)
-        affine = image.affine
     except Exception as err:
         raise VolumeFileError(f"{path}: unreadable NIfTI data ({type(err).__name__}: "
                               f"{err})") from None
-    same = qform is None or np.allclose(qform, affine, atol=1e-6)
     try:
-        frame = Frame(affine, sform_code=int(sform_code), qform_code=int(qform_code),
-                      qform=None if same else qform,
-                      unit=length_unit(image.header.get_xyzt_units()[0]))
+        frame = nifti_frame(image)
     except ValueError as err:
         raise VolumeFileError(f"{path}: the NIfTI affine: {err}") from None
     name = path.name[: -len(".nii.gz")] if path.name.lower().endswith(".nii.gz") else path.stem

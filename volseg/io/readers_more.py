@@ -66,18 +66,26 @@ def read_metaimage(path: Path, allow_external: bool = False):
         image = reader.Execute()
     except RuntimeError as err:
         raise VolumeFileError(f"{path}: unreadable MetaImage data ({_first_line(err)})") from None
+    try:
+        data, frame = sitk_image_arrays(image)
+    except ValueError as err:
+        raise VolumeFileError(f"{path}: the MetaImage geometry: {err}") from None
+    name = path.name.rsplit(".", 1)[0]
+    return data, frame, name, f"MetaImage {data.dtype}", files
+
+
+def sitk_image_arrays(image) -> tuple:
+    """(data indexed [x, y, z], `Frame` in RAS+) of a 3-D SimpleITK image: ITK's
+    (z, y, x) array transposed, its LPS direction, spacing and origin as the affine."""
+    import SimpleITK as sitk
+
     data = sitk.GetArrayFromImage(image).transpose(2, 1, 0)     # ITK's (z, y, x) -> x, y, z
     direction = np.array(image.GetDirection(), dtype=np.float64).reshape(3, 3)
     affine = np.eye(4)
     affine[:3, :3] = direction * np.array(image.GetSpacing())
     affine[:3, 3] = image.GetOrigin()
     affine[:2] *= -1.0                                          # LPS -> RAS+
-    try:
-        frame = Frame(affine, sform_code=1, qform_code=1)
-    except ValueError as err:
-        raise VolumeFileError(f"{path}: the MetaImage geometry: {err}") from None
-    name = path.name.rsplit(".", 1)[0]
-    return data, frame, name, f"MetaImage {data.dtype}", files
+    return data, Frame(affine, sform_code=1, qform_code=1, unit="millimeter")
 
 
 def _metaimage_fields(path: Path) -> tuple[dict, int]:

@@ -196,4 +196,4 @@ def degenerate_cut_warning(name: str, result, spread: dict, dtype) -> str | None
     else:
         fix = (f"try a larger --smooth than {result.smooth_sigma:g}, or --mask to leave "
                "the background out")
-    return f"warning: {what}: {fix}"
+    return f"{what}: {fix}"
