@@ -2,6 +2,8 @@
 SimpleITK for the NIfTI label maps, VTK's readers (ParaView's) for the ParaView files.
 The input is rotated, translated and in micrometres."""
 
+import json
+
 import nibabel
 import numpy as np
 import pytest
@@ -273,3 +275,25 @@ def test_napari_ome_zarr_opens_an_image_and_a_labels_layer(run):
     for _, options in layers.values():
         np.testing.assert_allclose(options["scale"], [0.8, 0.5, 0.4], rtol=1e-6)
         assert options["units"] == ("micrometer",) * 3
+
+
+def _validated(path):
+    """ome-zarr-models' reading of the OME-Zarr group at `path` (it raises when the
+    group matches no NGFF model)."""
+    import zarr
+    from ome_zarr_models import open_ome_zarr
+
+    return open_ome_zarr(zarr.open_group(str(path), mode="r"))
+
+
+def test_the_ome_zarr_output_validates_as_ngff_0_5(run):
+    """ome-zarr-py 0.18 leaves "version" out of the labels group, and ome-zarr-models
+    then refused the whole image; every group of the output validates now."""
+    from ome_zarr_models.v05.image import Image
+    from ome_zarr_models.v05.image_label import ImageLabel
+
+    store = run / "cell_segmentation.ome.zarr"
+    assert isinstance(_validated(store), Image)
+    assert isinstance(_validated(store / "labels" / "regions"), ImageLabel)
+    assert json.loads((store / "labels" / "zarr.json").read_text())["attributes"]["ome"][
+        "version"] == "0.5"

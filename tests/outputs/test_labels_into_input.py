@@ -227,3 +227,19 @@ def test_a_store_whose_writer_skipped_empty_chunks_reads_on_request(tmp_path, ca
     expected = segment_volume(data.transpose(2, 1, 0), n_regions=4)
     written = np.asarray(nibabel.load(tmp_path / "out" / "sparse_labels.nii.gz").dataobj)
     np.testing.assert_array_equal(written, expected.labels)
+
+
+@pytest.mark.parametrize("version", ["0.4", "0.5"])
+def test_labels_added_to_an_input_validate_in_its_ngff_version(tmp_path, version):
+    """The input with volseg's labels added is still an image ome-zarr-models reads,
+    in its own version, labels listed and versioned."""
+    import zarr
+    from ome_zarr_models import open_ome_zarr
+
+    image = _ome_image(tmp_path / f"in{version}.ome.zarr", version)
+    assert main(["segment", str(image), "-o", str(tmp_path / "o"), "-q", "--regions", "3",
+                 "--labels-into-input"]) == 0
+    model = open_ome_zarr(zarr.open_group(str(image), mode="r"))
+    assert type(model).__module__.startswith(f"ome_zarr_models.v0{version[-1]}")
+    labels = open_ome_zarr(zarr.open_group(str(image / "labels" / "volseg"), mode="r"))
+    assert type(labels).__name__ == "ImageLabel"

@@ -164,7 +164,17 @@ def write_ngff(path, labels, curvature, frame: Frame) -> Path:
                               label_transforms, "regions")
     dask.compute(*writes)
     write_label_metadata(root["labels"], "regions", source={"image": "../../"})
+    _versioned_labels(root["labels"])
     return path
+
+
+def _versioned_labels(labels_group) -> None:
+    """NGFF 0.5 wants ``"version": "0.5"`` in the ``labels`` group's ``ome`` block, which
+    ome-zarr-py 0.18's label writers leave out (ome-zarr-models then refuses the whole
+    image); a 0.4 group keeps its ``labels`` list as it is."""
+    attributes = labels_group.attrs.asdict()
+    if "ome" in attributes and "version" not in attributes["ome"]:
+        labels_group.attrs["ome"] = {"version": "0.5", **attributes["ome"]}
 
 
 def _transforms(scale, translation) -> list:
@@ -297,3 +307,4 @@ def _write_labels(labels, labels_group, root, name, order, fmt, axes, factors, o
     listed = list(get_metadata(labels_group).get("labels", []))
     if name not in listed:
         add_metadata(labels_group, {"labels": [*listed, name]}, fmt=fmt)
+    _versioned_labels(labels_group)
