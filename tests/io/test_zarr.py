@@ -377,3 +377,26 @@ def test_volseg_ome_zarr_output_reads_back_as_its_curvature(tmp_path, volume):
     curvature = nibabel.load(tmp_path / "o" / "v_curvature.nii.gz")
     np.testing.assert_array_equal(np.asarray(back.data), np.asarray(curvature.dataobj))
     np.testing.assert_allclose(back.frame.affine, curvature.affine)
+
+
+@pytest.mark.parametrize("zarr_format", [2, 3])
+def test_a_blosc_chunk_cut_short_is_refused_not_read_as_garbage(tmp_path, zarr_format):
+    """Noise compresses badly, so blosc stores the chunk raw; cut to half its length it
+    used to decode past its end: different garbage on every read. Now the chunk's
+    length is checked against its blosc header before anything is decoded."""
+    import zarr
+    from zarr.codecs import BloscCodec
+
+    from volseg.io import VolumeFileError, read_volume
+
+    store = tmp_path / f"noise{zarr_format}.zarr"
+    compressors = (BloscCodec(cname="lz4", clevel=5) if zarr_format == 3
+                   else __import__("numcodecs").Blosc(cname="lz4", clevel=5))
+    array = zarr.create_array(str(store), shape=(32, 32, 32), chunks=(32, 32, 16),
+                              dtype="f8", zarr_format=zarr_format, compressors=compressors)
+    array[:] = np.random.default_rng(0).random((32, 32, 32))
+    assert np.array_equal(np.asarray(read_volume(store).data), array[:])     # whole: fine
+    chunk = store / array.metadata.encode_chunk_key((0, 0, 1))
+    chunk.write_bytes(chunk.read_bytes()[: chunk.stat().st_size // 2])
+    with pytest.raises(VolumeFileError, match="blosc header says .* cut short"):
+        read_volume(store)
