@@ -550,3 +550,26 @@ def test_lengths_that_would_overflow_the_operators_are_refused(tmp_path, capsys)
                      str(tmp_path / "o"), "--time-scale", scale]) == 2
         assert "`--time-scale` must be a" in _one_clean_line(capsys.readouterr().err)
     assert _visible(tmp_path / "o") == []
+
+
+def test_force_leaves_no_file_of_the_old_run_beside_the_new_set(tmp_path, capsys):
+    """Issue 57's case: --chunks 16 --regions 7 --plot-persistence, then --force --regions
+    12 --no-vti; the old .zarr stores, .vti and persistence plot were left beside the new
+    set (and a reader of the folder saw the old labels). The same here on a small
+    volume, the new run with another field: only the new set is there; without
+    --force, any file of the stem's sets is refused."""
+    source = tmp_path / "s.npy"
+    np.save(source, np.repeat(_blob((16, 14, 12)), 2, axis=0))
+    out = tmp_path / "out"
+    assert main(["segment", str(source), "-o", str(out), "-q", "--chunks", "8",
+                 "--regions", "3", "--plot-persistence"]) == 0
+    old = {p.name for p in out.iterdir() if not p.name.startswith(".")}
+    assert {"s_labels.zarr", "s_curvature.zarr", "s_persistence.png"} <= old
+    assert main(["segment", str(source), "-o", str(out), "-q", "--regions", "2", "--no-vti",
+                 "--field", "gradient"]) == 2          # the old set's files: refused
+    assert "exists" in capsys.readouterr().err
+    assert main(["segment", str(source), "-o", str(out), "-q", "--force", "--regions", "2",
+                 "--no-vti", "--field", "gradient"]) == 0
+    new = {p.name for p in out.iterdir() if not p.name.startswith(".")}
+    assert new == {"s_labels.nii.gz", "s_gradient.nii.gz", "s_segmentation.ome.zarr",
+                   "s_summary.json", "s_preview.png"}, new

@@ -28,10 +28,11 @@ from . import _validate
 from ._jit_cache import first_run_note
 from .curvature import entry_kernels as curvature_kernels
 from .errors import UsageError, VolsegWarning
-from .fields import field_entry
+from .fields import FIELDS, GIVEN, field_entry
 from .io import Frame, OutputSet
 from .morse import entry_kernels as morse_kernels
 from .outputs import (
+    all_output_names,
     degenerate_cut_warning,
     files_sha256,
     input_files,
@@ -167,9 +168,11 @@ def output_sets(volumes, out_dir, *, force=False, wait=False, persistence_plot=F
                 f"{Path(out_dir) / volume.name}_*; segment them into different folders")
         seen[volume.name] = volume.path or volume.name
     name = field_entry(field).name
+    fields = (*FIELDS, GIVEN)
     return [OutputSet(out_dir, v.name, output_names(v.name, persistence_plot, _is_lazy(v),
                                                     int(np.prod(v.shape)), paraview, name),
-                      force=force, wait=wait) for v in volumes]
+                      force=force, wait=wait, owns=all_output_names(v.name, fields))
+            for v in volumes]
 
 
 def segment_files(volumes, out_dir, *, force=False, wait=False, persistence_plot=False,
@@ -285,7 +288,7 @@ def segment_to_files(volume, outputs, *, operator="weighted", n_regions=None,
     def write(paths):
         storage = _storage(volume, data, request, paths, outputs, checksum, engine, say)
         if lazy:       # removed with the commit, or by the next run that finishes it
-            outputs.discard = [storage.work_folder]
+            outputs.discard = [*outputs.discard, storage.work_folder]
         blocks = f" in {storage.chunks} blocks" if lazy else ""
         what = (f"curvature ({request.operator.name})" if request.field.needs_scale
                 else request.field.label)

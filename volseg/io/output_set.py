@@ -263,6 +263,10 @@ class OutputSet:
         Replace an existing set.
     wait : bool
         Wait for another writer of the same stem instead of failing at once.
+    owns : iterable of str
+        Every other file name a set of this stem can have (other options' outputs): an
+        existing one is refused like a target without `force`, and removed with the
+        commit, so no file of an older run stays beside the new set.
 
     Examples
     --------
@@ -270,10 +274,12 @@ class OutputSet:
     ...     out.commit(lambda paths: paths["summary"].write_text("{}"))
     """
 
-    def __init__(self, folder, stem: str, names: dict, *, force: bool = False, wait: bool = False):
+    def __init__(self, folder, stem: str, names: dict, *, force: bool = False, wait: bool = False,
+                 owns=()):
         self.folder = Path(folder)
         self.stem = stem
         self.targets = {kind: self.folder / name for kind, name in names.items()}
+        self.owned = [self.folder / name for name in sorted(set(owns) - set(names.values()))]
         self.force = force
         self.wait = wait
         self.recovered: list[str] = []
@@ -321,7 +327,7 @@ class OutputSet:
         """Refuse targets that exist (without `force`) or are not regular files (a
         ``.zarr`` target is a folder: a folder is accepted there, nothing else)."""
         existing = []
-        for path in self.targets.values():
+        for path in [*self.targets.values(), *self.owned]:
             try:
                 mode = os.lstat(path).st_mode
             except FileNotFoundError:
@@ -353,6 +359,8 @@ class OutputSet:
             if missing:
                 raise RuntimeError(f"the writer did not write {', '.join(missing)}")
             self.check()  # nothing appeared meanwhile (the lock keeps volseg out, not others)
+            stale = [path for path in self.owned if os.path.lexists(path)]
+            self.discard = [*self.discard, *stale]      # an older run's other outputs
             journal = staging / f".{_JOURNAL}.part"
             journal.write_text(json.dumps({"names": [t.name for t in self.targets.values()],
                                            "discard": [p.name for p in self.discard]}))

@@ -16,6 +16,7 @@ from ._summary import (
     OUTPUT_SUFFIXES,
     PARAVIEW_SUFFIX,
     PARAVIEW_VOXELS,
+    all_output_names,
     degenerate_cut_warning,
     files_sha256,
     input_files,
@@ -29,7 +30,8 @@ from ._write import write_result_files, write_segmentation
 
 __all__ = ["OUTPUT_SUFFIXES", "BLOCKWISE_SUFFIXES", "BLOCKWISE_NIFTI_VOXELS", "PARAVIEW_SUFFIX",
            "NGFF_SUFFIX", "PARAVIEW_VOXELS",
-           "LISTED_PERSISTENCES", "output_names", "files_sha256", "input_files", "summary",
+           "LISTED_PERSISTENCES", "output_names", "all_output_names", "files_sha256",
+           "input_files", "summary",
            "result_summary", "input_summary", "result_title", "degenerate_cut_warning",
            "write_result_files",
            "write_segmentation"]

@@ -19,7 +19,7 @@ from ..morse import get_measure
 from ..morse.cuts import LISTED_PERSISTENCES
 
 __all__ = ["OUTPUT_SUFFIXES", "BLOCKWISE_NIFTI_VOXELS", "PARAVIEW_SUFFIX", "PARAVIEW_VOXELS",
-           "NGFF_SUFFIX", "output_names", "files_sha256", "summary",
+           "NGFF_SUFFIX", "output_names", "all_output_names", "files_sha256", "summary",
            "result_summary", "input_summary", "result_title", "degenerate_cut_warning"]
 
 OUTPUT_SUFFIXES = {"labels": "_labels.nii.gz", "curvature": "_curvature.nii.gz",
@@ -66,6 +66,19 @@ def output_names(stem: str, persistence_plot: bool = False, blockwise: bool = Fa
                       for kind, suffix in BLOCKWISE_SUFFIXES.items()})
     if persistence_plot:
         names["persistence"] = f"{stem}_persistence.png"
+    return names
+
+
+def all_output_names(stem: str, fields=("curvature",)) -> set:
+    """Every file name a set of `stem` can have, whatever its options (each of
+    `fields`, in memory or blockwise, with the persistence plot and the ParaView image):
+    what a new set of the stem replaces, so no file of an older run stays beside it."""
+    names = set()
+    for field in fields:
+        names |= set(output_names(stem, persistence_plot=True, blockwise=True, voxels=1,
+                                  paraview=True, field=field).values())
+        names |= set(output_names(stem, persistence_plot=True, paraview=True,
+                                  field=field).values())
     return names
 
 
