@@ -25,6 +25,8 @@ SAMPLE_VOXELS = 2**21
 #: How far from an integer (in steps) a value may lie and still be on the lattice:
 #: float32's rounding of k / 255 is a few 1e-6 steps off, anything else far more.
 TOLERANCE = 1e-3
+#: Voxels checked at a time in memory (32 MB of float64 temporaries).
+SLAB = 2**22
 
 
 @dataclass(frozen=True)
@@ -66,13 +68,17 @@ def lattice_of(data, value_range) -> Lattice | None:
     step = (high - low) / count                   # the span's own step, not one gap's
     if not _on(offsets, step):
         return None
+    if data.dtype.kind in "iu" and step == 1:
+        return Lattice(low, step, count + 1)      # every integer is on it: no pass
     if hasattr(data, "map_blocks"):
         import dask
 
         off = data.map_blocks(_worst, low, step, dtype=np.float64, chunks=(1, 1, 1)).max()
         worst, = dask.compute(off)
     else:
-        worst = _worst(np.asarray(data), low, step).max()
+        flat = np.asarray(data).reshape(-1)       # in slabs: no float64 copy of it all
+        worst = max(_worst(flat[i:i + SLAB], low, step).max()
+                    for i in range(0, flat.size, SLAB))
     return Lattice(low, step, count + 1) if worst <= TOLERANCE else None
 
 
@@ -83,7 +89,8 @@ def _on(offsets, step) -> bool:
 
 def _worst(block, low, step) -> np.ndarray:
     k = (block.astype(np.float64) - low) / step
-    return np.full((1, 1, 1), np.max(np.abs(k - np.round(k))) if k.size else 0.0)
+    worst = np.max(np.abs(k - np.round(k))) if k.size else 0.0
+    return np.full((1,) * block.ndim, worst)
 
 
 def on_lattice(data, lattice: Lattice):

@@ -31,7 +31,7 @@ from .curvature import (
     get_operator,
 )
 from .errors import VolsegWarning
-from .fields import FIELD_REGISTRY, Field, field_entry, for_morse
+from .fields import FIELD_REGISTRY, GIVEN, Field, field_entry, for_morse
 from .masks import MaskChoice, check_rule, foreground_mask
 from .morse import (
     PERSISTENCE,
@@ -447,8 +447,10 @@ def run_stages(data, request: SegmentRequest, storage: Storage | None = None, *,
         scale = request.value_scale
         if scale is None and entry.needs_scale:
             scale = _default_scale(values, request, shifted_range, source)
-        field = storage.curvature(_checked_given(
-            entry.make(values, shifted_range, request, scale, hooks), data, source))
+        field = entry.make(values, shifted_range, request, scale, hooks)
+        if entry.name == GIVEN:                 # the user's array: checked here, once
+            field = _checked_given(field, data, source)
+        field = storage.curvature(field)
     hierarchy, labels, report = _morse_and_cut(
         for_morse(entry, field), request.cut, timings, mask=choice.mask, storage=storage,
         vertex_weight=float(np.prod(request.spacing)))
@@ -461,7 +463,7 @@ def run_stages(data, request: SegmentRequest, storage: Storage | None = None, *,
 
 
 def _checked_given(field, data, source):
-    """A field (made, or given by the user) of the volume's shape, float64, finite."""
+    """A field the user gave: of the volume's shape, float64, finite."""
     if field.shape != data.shape:
         raise ValueError(f"`field` must have the volume's shape {data.shape}, got {field.shape}")
     if _validate.is_lazy(field):
