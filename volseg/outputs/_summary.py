@@ -178,7 +178,10 @@ def summary(result, *, name, source=None, checksum=None, files=(), frame: Frame 
 def result_title(name: str, result, *, blockwise: bool = False, spread=None) -> str:
     """The preview's title of a volume's `Segmentation`: regions, operator, smoothing,
     mask, path; with a degenerate `spread` (`volseg.metrics.region_spread`), that too."""
-    title = f"{name}: {result.n_regions} regions, {result.operator.replace('_', '-')} curvature"
+    field = getattr(result, "field", "curvature")
+    what = (f"{result.operator.replace('_', '-')} curvature" if field == "curvature"
+            else f"the {field} field")
+    title = f"{name}: {result.n_regions} regions, {what}"
     if result.smooth_sigma:
         title += f", smoothed sigma {result.smooth_sigma:g}"
     if result.mask is not None and result.mask.mask is not None:

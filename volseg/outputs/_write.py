@@ -46,7 +46,8 @@ def write_result_files(paths: dict, result, values, info: dict, *, frame: Frame 
                 if key in paths and not Path(paths[key]).exists()]
         jobs.append(pool.submit(write_preview, paths["preview"], values, result.curvature,
                                 result.labels, title=title, persistence=curve,
-                                value_range=value_range, n_labels=k, measure=result.measure))
+                                value_range=value_range, n_labels=k, measure=result.measure,
+                                field=getattr(result, "field", "curvature")))
         if "ngff" in paths:
             jobs.append(pool.submit(write_ngff, paths["ngff"], arrays["labels"],
                                     result.curvature, frame))     # its means in float64

@@ -232,7 +232,8 @@ def _colour_bar(canvas, draw, x, y, width, colours, ticks, label, font):
 
 
 def write_preview(path, volume, curvature, labels, *, title="", persistence=None,
-                  value_range=None, n_labels=None, measure="persistence") -> Path:
+                  value_range=None, n_labels=None, measure="persistence",
+                  field="curvature") -> Path:
     """Mid slices along x, y, z: the volume, its curvature, the labels over the volume,
     and (given ``persistence=(extinction, n_components, threshold)``) the curve of
     the cut's `measure` below them.
@@ -243,6 +244,8 @@ def write_preview(path, volume, curvature, labels, *, title="", persistence=None
     +-(99th percentile of ``|H|`` over the slices shown).
     `value_range` (the volume's min and max) and `n_labels` (the largest label), when
     the caller knows them, spare a lazy volume's passes over the volume and the labels.
+    `field`: the field `curvature` holds (`volseg.fields`), named in the middle panels
+    and their colour bar.
     """
     from PIL import Image, ImageDraw
 
@@ -253,7 +256,7 @@ def write_preview(path, volume, curvature, labels, *, title="", persistence=None
     rows = []
     for row, axis in enumerate("xyz"):
         vol, cur, lab = sliced[0][row].T, sliced[1][row].T, sliced[2][row].T
-        panels = [("volume", gray(vol, lo, hi)), ("curvature", diverging(cur, limit)),
+        panels = [("volume", gray(vol, lo, hi)), (field, diverging(cur, limit)),
                   ("regions", overlay(vol, lab, lo, hi))]
         rows.append((axis, indices[row][row], [(name, _fit(rgb)) for name, rgb in panels]))
     heights = [max(image.shape[0] for _, image in panels) for _, _, panels in rows]
@@ -278,7 +281,7 @@ def write_preview(path, volume, curvature, labels, *, title="", persistence=None
     _colour_bar(canvas, draw, _LEFT + _BOX + _GAP, bar_y, _BOX,
                 diverging(np.linspace(-limit, limit, _BOX), limit),
                 [(0, f"{-limit:.3g}"), (0.5, "0"), (1, f"{limit:.3g}")],
-                "mean curvature (+ peak, - valley)", small)
+                "mean curvature (+ peak, - valley)" if field == "curvature" else field, small)
     if curve is not None:
         canvas.paste(Image.fromarray(curve), (_LEFT, bar_y + 62))
     canvas.save(path, format="PNG")
