@@ -449,7 +449,7 @@ def run_stages(data, request: SegmentRequest, storage: Storage | None = None, *,
             scale = _default_scale(values, request, shifted_range, source)
         field = entry.make(values, shifted_range, request, scale, hooks)
         if entry.name == GIVEN:                 # the user's array: checked here, once
-            field = _checked_given(field, data, source)
+            field = _checked_given(field, data)
         field = storage.curvature(field)
     hierarchy, labels, report = _morse_and_cut(
         for_morse(entry, field), request.cut, timings, mask=choice.mask, storage=storage,
@@ -462,16 +462,14 @@ def run_stages(data, request: SegmentRequest, storage: Storage | None = None, *,
     return result, value_range
 
 
-def _checked_given(field, data, source):
-    """A field the user gave: of the volume's shape, float64, finite."""
+def _checked_given(field, data):
+    """A field the user gave: of the volume's shape, float64, finite (the checks of
+    `_validate.volume_array`, naming `field`)."""
     if field.shape != data.shape:
         raise ValueError(f"`field` must have the volume's shape {data.shape}, got {field.shape}")
     if _validate.is_lazy(field):
-        return field.astype(np.float64)
-    field = np.asarray(field, dtype=np.float64)
-    if not np.isfinite(field).all():
-        raise ValueError(f"the field of {source} holds NaN or infinite values")
-    return field
+        return _validate.lazy_volume_array(field, "field").astype(np.float64)
+    return np.asarray(_validate.volume_array(field, "field"), dtype=np.float64)
 
 
 def _morse_and_cut(field, cut: CutRequest, timings, *, mask=None, adjacency=None,
