@@ -51,8 +51,11 @@ def test_dask_in_uneven_chunks_equals_numpy_for_every_field_and_measure(rng, fie
 
 
 def test_the_gradient_follows_edges_the_curvature_does_not(rng):
-    """On touching flat-topped spheres on a graded background, the gradient's basins
-    find the spheres: its adjusted Rand index against the truth beats the curvature's."""
+    """On small touching flat-topped spheres on a larger graded background, the
+    gradient's basins find the spheres: its adjusted Rand index against the truth beats
+    the curvature's. Cut by hypervolume (the sum of each basin's own pond): by volume,
+    the field's default, the background's wide shallow basins outweigh small objects
+    (0.27 here; docs/guide/useful-regions.md)."""
     from volseg.metrics import adjusted_rand_index
 
     volume = _phantom(rng, (30, 22, 20))
@@ -62,8 +65,8 @@ def test_the_gradient_follows_edges_the_curvature_does_not(rng):
                                               ((11, 3, 12), 4)), 1):
         inside = sum((c - a) ** 2 for c, a in zip((x, y, z), centre, strict=True)) <= radius**2
         truth[inside] = label
-    score = {field: adjusted_rand_index(truth, segment_volume(volume, field=field, mask=None,
-                                                              n_regions=4).labels)
+    score = {field: adjusted_rand_index(truth, segment_volume(
+        volume, field=field, mask=None, n_regions=4, measure="hypervolume").labels)
              for field in ("curvature", "gradient")}
     assert score["gradient"] > 0.8 and score["gradient"] > score["curvature"] + 0.2, score
 
@@ -84,13 +87,13 @@ def test_the_cli_writes_the_field_it_used_and_says_so(tmp_path, capsys, rng):
     source = tmp_path / "p.npy"
     np.save(source, _phantom(rng))
     assert main(["segment", str(source), "-o", str(tmp_path / "o"), "-q", "--json",
-                 "--field", "gradient", "--regions", "4"]) == 0
+                 "--field", "gradient", "--regions", "4", "--mask", "none"]) == 0
     summary = json.loads(capsys.readouterr().out)
     assert summary["field"] == "gradient" and summary["n_regions"] == 4
     assert (tmp_path / "o" / "p_gradient.nii.gz").exists()
     assert not (tmp_path / "o" / "p_curvature.nii.gz").exists()
     assert main(["segment", str(source), "-o", str(tmp_path / "b"), "-q", "--json",
-                 "--field", "gradient", "--regions", "4", "--chunks", "8"]) == 0
+                 "--field", "gradient", "--regions", "4", "--mask", "none", "--chunks", "8"]) == 0
     blockwise = json.loads(capsys.readouterr().out)
     assert [r["size"] for r in blockwise["regions"]] == [r["size"] for r in summary["regions"]]
     assert main(["segment", str(source), "-o", str(tmp_path / "x"), "--field", "edgy"]) == 2

@@ -44,7 +44,7 @@ __all__ = ["Field", "FIELD_REGISTRY", "FIELDS", "get_field", "field_entry", "giv
 class Field:
     """A field the Morse complex can be built on.
 
-    `make(values, span, request, scale, hooks)` gives the field as a user sees it
+    `make(values, span, request, scale, hooks, mask)` gives the field as a user sees it
     (numpy in, numpy out; Dask in, lazy Dask out, equal to numpy's exactly); the
     complex is built on ``sign * field``. `halo`: the voxels of halo a block needs.
     `needs_scale`: the field reads the graph's value scale (the curvature). `measure`:
@@ -77,38 +77,68 @@ def _normalised_block(block, low, width):
     return (block.astype(np.float64) - low) / width
 
 
-def gradient_magnitude(values, spacing):
+def gradient_magnitude(values, spacing, mask=None):
     """(X, Y, Z) |grad f| of `values` with the voxel `spacing`: central differences
-    inside, one-sided at the volume's border (`numpy.gradient`); a Dask array block by
+    inside, one-sided at the volume's border (as `numpy.gradient`). With a `mask`, a
+    difference never reaches outside it: one-sided at the mask's border, 0 for a voxel
+    with no masked neighbour along an axis, so the mask's edge (a skull-stripped
+    brain's rim, a CT's air) makes no basin walls of its own. A Dask array block by
     block with a one-voxel halo (none past the border), equal to numpy's exactly."""
     spacing = tuple(float(s) for s in spacing)
     if _validate.is_lazy(values):
-        return values.map_overlap(_gradient_block, depth=1, boundary="none",
-                                  dtype=np.float64, spacing=spacing)
-    return _gradient_block(np.asarray(values, dtype=np.float64), spacing=spacing)
+        if mask is None:
+            return values.map_overlap(_gradient_block, depth=1, boundary="none",
+                                      dtype=np.float64, spacing=spacing)
+        import dask.array as da
+
+        mask = da.asarray(mask).rechunk(values.chunks)
+        return da.map_overlap(_gradient_block, values, mask, depth=1, boundary="none",
+                              dtype=np.float64, spacing=spacing)
+    return _gradient_block(np.asarray(values, dtype=np.float64),
+                           None if mask is None else np.asarray(mask, bool), spacing=spacing)
 
 
-def _gradient_block(block, spacing):
+def _gradient_block(block, mask=None, *, spacing):
     block = np.asarray(block, dtype=np.float64)
+    inside = np.ones(block.shape, bool) if mask is None else np.asarray(mask, bool)
     squares = np.zeros(block.shape)
     for axis, step in enumerate(spacing):
-        if block.shape[axis] > 1:
-            squares += np.gradient(block, step, axis=axis) ** 2
+        n = block.shape[axis]
+        if n < 2:
+            continue
+
+        def part(start, stop, a=axis):
+            return (slice(None),) * a + (slice(start, stop),)
+
+        pair = inside[part(1, None)] & inside[part(None, -1)]      # (i, i + 1) both in
+        forward = np.zeros(block.shape)
+        forward[part(None, -1)] = np.where(pair, (block[part(1, None)]
+                                                  - block[part(None, -1)]) / step, 0.0)
+        after = np.zeros(block.shape, bool)
+        after[part(None, -1)] = pair
+        before = np.zeros(block.shape, bool)
+        before[part(1, None)] = pair
+        backward = np.zeros(block.shape)
+        backward[part(1, None)] = forward[part(None, -1)]
+        central = np.zeros(block.shape)
+        central[part(1, -1)] = (block[part(2, None)] - block[part(None, -2)]) / (2.0 * step)
+        squares += np.where(after & before, central,
+                            np.where(after, forward, np.where(before, backward, 0.0))) ** 2
     return np.sqrt(squares)
 
 
-def _curvature(values, span, request, scale, hooks):
+def _curvature(values, span, request, scale, hooks, mask=None):
     from .curvature import checked_grid_curvature
 
     return checked_grid_curvature(values, request.operator, request.spacing, scale,
                                   request.padding, block_hooks=hooks)
 
 
-def _gradient(values, span, request, scale, hooks):
-    return gradient_magnitude(normalised(values, span), request.spacing)
+def _gradient(values, span, request, scale, hooks, mask=None):
+    return gradient_magnitude(normalised(values, span), request.spacing, mask)
 
 
-def _value(values, span, request, scale, hooks):
+def _value(values, span, request, scale, hooks, mask=None):
     low, high = (float(v) for v in span)
     if low < 0 < high:                      # a signed map: bright and dark blobs
         field = abs(values) if _validate.is_lazy(values) else np.abs(values)
@@ -120,7 +150,7 @@ FIELD_REGISTRY = Registry("field", [
     Field("curvature", "curvature", ("mean-curvature",), _curvature, 1.0, 1, True,
           "hypervolume", "mean curvature of the graph in R^4: territories around peaks"),
     Field("gradient", "gradient magnitude", ("edges", "watershed"), _gradient, -1.0, 1,
-          False, "hypervolume", "basins of |grad f|: regions bounded by edges"),
+          False, "volume", "basins of |grad f|: regions bounded by edges"),
     Field("value", "value", ("intensity", "blobs"), _value, 1.0, 0, False, "hypervolume",
           "the values: regions around bright blobs (|f| on a signed map)"),
 ])
@@ -137,7 +167,7 @@ def get_field(field: str | Field) -> Field:
 
 def given(array) -> Field:
     """The entry of a field the user computed: the complex built on `array` itself."""
-    def make(values, span, request, scale, hooks):
+    def make(values, span, request, scale, hooks, mask=None):
         return array
 
     return Field(GIVEN, "given field", (), make, 1.0, 0, False, "hypervolume",

@@ -447,7 +447,7 @@ def run_stages(data, request: SegmentRequest, storage: Storage | None = None, *,
         scale = request.value_scale
         if scale is None and entry.needs_scale:
             scale = _default_scale(values, request, shifted_range, source)
-        field = entry.make(values, shifted_range, request, scale, hooks)
+        field = entry.make(values, shifted_range, request, scale, hooks, choice.mask)
         if entry.name == GIVEN:                 # the user's array: checked here, once
             field = _checked_given(field, data)
         field = storage.curvature(field)

@@ -272,14 +272,16 @@ def test_bad_measures_and_mixed_thresholds_are_refused():
         h.segment(threshold=1.0, n_regions=2, measure="size")
 
 
-def test_higras_names_are_aliases_of_the_measures():
-    """dynamics, area and volume (higra's watershed hierarchies) name the height, size
-    and hypervolume entries: the same cut by either name."""
+def test_higras_names_name_the_same_hierarchies():
+    """dynamics is the height (persistence) entry; area and volume are the watershed
+    entries (`volseg.morse._basins`), not the Carr pruning's size and hypervolume."""
     from volseg.morse import MEASURE_REGISTRY, get_measure
 
     h = descending_complex(np.random.default_rng(0).random((6, 5, 4)))
-    for alias, name in (("dynamics", "persistence"), ("area", "size"), ("volume", "hypervolume"),
+    for alias, name in (("dynamics", "persistence"), ("Basin-Volume", "volume"),
                         ("HyperVolume", "hypervolume")):
         assert get_measure(alias) is MEASURE_REGISTRY[name]
         assert np.array_equal(h.segment(n_regions=4, measure=alias),
                               h.segment(n_regions=4, measure=name))
+    assert get_measure("area").watershed and get_measure("volume").watershed
+    assert not get_measure("size").watershed

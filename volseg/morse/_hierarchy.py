@@ -13,7 +13,8 @@ from numpy.typing import NDArray
 
 from .._sizes import SizedByArrays
 from ..errors import VolsegWarning
-from . import _kernels, _measures, _prune, _prune_groups
+from . import _basins, _kernels, _measures, _prune, _prune_groups
+from ._basins import Basins
 from ._graph import grid_offsets
 from ._measures import SIZE, get_measure
 
@@ -223,7 +224,7 @@ class MorseHierarchy(SizedByArrays):
         """The same hierarchy given each cell's measures ({measure: what
         `_measures.cell_measures` gives}), so that its cuts read no cell."""
         out = dataclasses.replace(self, _pruned={})
-        out._pruned.update({("cells", m): v if isinstance(v, _measures.Fixed)
+        out._pruned.update({("cells", m): v if isinstance(v, _measures.Fixed | Basins)
                             else np.asarray(v, np.float64) for m, v in measures.items()})
         return out
 
@@ -233,6 +234,9 @@ class MorseHierarchy(SizedByArrays):
         small heaps stay in cache), else sequentially."""
         if measure not in self._pruned:
             base = self._cell_base(measure)
+            if isinstance(base, Basins):
+                self._pruned[measure] = self._watershed(measure, base)
+                return self._pruned[measure]
             fixed = isinstance(base, _measures.Fixed)
             if fixed and self._adjacency is None and len(self.shape) == 3:
                 leaf_of, tree = _prune_groups.grid_leaves(self.maxima, self.shape)
@@ -247,6 +251,16 @@ class MorseHierarchy(SizedByArrays):
                 extinction = extinction.astype(np.float64) * base.scale
             self._pruned[measure] = (order, extinction, self._cell_values(measure))
         return self._pruned[measure]
+
+    def _watershed(self, measure, basins):
+        """(order, extinction, cell values) of a watershed measure: the events by
+        saliency (`_basins`), every cut a prefix of the order."""
+        volume = get_measure(measure).by_height
+        salient = _basins.saliency(basins, self.source, self.target, self.saddle_value,
+                                   len(self.maxima), volume)
+        order = _basins.merge_order(salient)
+        scale = basins.scale * (basins.unit if volume else 1.0)
+        return order, salient.astype(np.float64) * scale, basins.values
 
     def threshold_for(self, n_regions: int, measure: str = "persistence",
                       min_component: float = 0.0) -> float:

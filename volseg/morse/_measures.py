@@ -33,9 +33,10 @@ class Measure:
 
     `pruned`: False for a measure read off the elder-rule events as they are (the
     height, persistence); True for one that is a sum of per-vertex terms over a
-    region, cut by the Carr et al. pruning. `by_height`: a vertex's term is its height
-    above the cell's highest saddle (hypervolume), else 1 (size), both times the
-    vertex weight. `option`: the command line's option for its threshold; `unit`:
+    region: cut by the Carr et al. pruning, or with `watershed` by the saliency of
+    the events as a watershed hierarchy (`_basins`). `by_height`: a vertex's term is
+    its height above the saddle (hypervolume, volume), else 1 (size, area), both
+    times the vertex weight. `option`: the command line's option for its threshold; `unit`:
     what its threshold counts.
     """
 
@@ -47,17 +48,25 @@ class Measure:
     unit: str
     summary: str
     aliases: tuple[str, ...] = ()
+    watershed: bool = False
 
 
 MEASURE_REGISTRY = Registry("measure", [
     Measure("persistence", "persistence", False, False, "--min-persistence",
             "field units", "height of a peak above the saddle where it merges "
-            "(Edelsbrunner et al. 2002)", ("height", "dynamics")),
+            "(Edelsbrunner et al. 2002); higra's dynamics", ("height", "dynamics")),
     Measure("size", "size", True, False, "--threshold", "voxels x voxel volume",
-            "the region's volume (Carr et al. 2004)", ("area",)),
+            "the region's volume (Carr et al. 2004)"),
     Measure("hypervolume", "hypervolume", True, True, "--threshold",
             "field units x voxel volume", "the region's volume under the field "
-            "above its saddle (Carr et al. 2004)", ("volume",)),
+            "above its saddle (Carr et al. 2004)"),
+    Measure("area", "basin area", True, False, "--threshold", "voxels x voxel volume",
+            "watershed hierarchy by area: the smaller region's size at the saddle "
+            "(higra's watershed_hierarchy_by_area)", ("basin-area",), watershed=True),
+    Measure("volume", "basin volume", True, True, "--threshold",
+            "field units x voxel volume", "watershed hierarchy by volume: the smaller "
+            "region's volume above the saddle (higra's watershed_hierarchy_by_volume)",
+            ("basin-volume",), watershed=True),
 ])
 #: The cut measures' names; ``persistence`` is the height of docs/design.md section 5.
 MEASURES = tuple(MEASURE_REGISTRY)
@@ -97,11 +106,17 @@ def check_measure(measure) -> str:
     return get_measure(measure).name
 
 
-def cell_measures(hierarchy, measure: str) -> Fixed | np.ndarray:
+def cell_measures(hierarchy, measure: str):
     """`measure` of each maximum's cell (``size`` or ``hypervolume``): `Fixed` on a grid
-    or with a scalar vertex weight, (M,) float64 sums with a mesh's weights."""
+    or with a scalar vertex weight, (M,) float64 sums with a mesh's weights; for a
+    watershed measure (``area``, ``volume``) its cells' `_basins.Basins`."""
     n_max = len(hierarchy.maxima)
     weight = hierarchy.vertex_weight
+    if get_measure(measure).watershed:                  # per (cell, rank): `_basins`
+        from ._basins import records
+
+        return records(hierarchy.cells, hierarchy._field, hierarchy.saddle_value, weight,
+                       unit_of, scale_of)
     hypervolume = get_measure(measure).by_height
     saddles, unit = np.zeros(0), 1.0          # a size: every term is 1, no saddle read
     if hypervolume:

@@ -21,10 +21,12 @@ def in_buckets(hierarchy, cut) -> bool:
     """Whether the cut of a blockwise `hierarchy` runs where its buckets are, joining
     no maximum (`volseg.morse.HierarchyOnWorkers.cut_in_buckets`): a cut of at most
     `MAX_COUNT_IN_BUCKETS` regions, by persistence or by a size measure with no
-    per-vertex weight."""
+    per-vertex weight. A watershed measure (``area``, ``volume``) reads the events
+    in sweep order: where the hierarchy is joined."""
+    measure = get_measure(cut.measure)
     return (hierarchy.buckets is not None and cut.ranks_read <= MAX_COUNT_IN_BUCKETS + 1
-            and (not get_measure(cut.measure).pruned
-                 or np.ndim(hierarchy.vertex_weight) == 0))
+            and not measure.watershed
+            and (not measure.pruned or np.ndim(hierarchy.vertex_weight) == 0))
 
 
 def cut_of(hierarchy, cut) -> tuple:

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import _prune
+from .. import _basins, _prune
 from .._measures import (
     Fixed,
     _cell_saddles,
@@ -69,6 +69,11 @@ def lazy_cell_measures(cells, field, n_max: int, weight, events, measures, compu
         ids, = keep(block_cells(cells))
     out = {}
     for name in measures:
+        if get_measure(name).watershed:              # per (cell, rank): `_basins`
+            if low_high is None:
+                low_high = computed_range(cells, field, compute)
+            out[name] = _basins_of(cells, field, events, low_high, weight)
+            continue
         if not get_measure(name).by_height:                   # a count per vertex
             sizes, = keep(block_counts(cells))
             out[name] = _total(n_max, weight, 1.0, ids, sizes)
@@ -81,6 +86,35 @@ def lazy_cell_measures(cells, field, n_max: int, weight, events, measures, compu
         sums, = keep(per_block(_block_hypervolumes, cells, field, ids, saddles, unit=unit))
         out[name] = _total(n_max, weight, unit, ids, sums)
     return out
+
+
+def _basins_of(cells, field, events, low_high, weight):
+    """Delayed `_basins.Basins` of lazy cells: each block's records (one task per
+    block, given the events' saddles as one shared task), summed in one task."""
+    import dask
+
+    unit = unit_of(*low_high)
+    negated = dask.delayed(_negated_saddles, pure=True)(events)
+    parts = per_block(_block_basins, cells, field, negated=negated, low=low_high[0],
+                      unit=unit)
+    parts = list(parts.to_delayed(optimize_graph=False).ravel())
+    n_events = dask.delayed(len, pure=True)(negated)
+    return dask.delayed(_joined_basins, pure=True)(n_events, low_high[0], unit,
+                                                   scale_of(weight, 1.0), *parts)
+
+
+def _negated_saddles(events) -> np.ndarray:
+    return -np.asarray(events.saddle_value, np.float64)
+
+
+def _block_basins(cells, field, block_id, negated, low, unit):
+    return _basins.block_records(np.ascontiguousarray(cells).ravel(),
+                                 np.ascontiguousarray(field, np.float64).ravel(), negated,
+                                 low, unit)
+
+
+def _joined_basins(n_events, low, unit, scale, *parts):
+    return _basins.joined([p.flat[0] for p in parts], n_events, low, unit, scale)
 
 
 def _total(n_max, weight, unit, ids, sums):

@@ -1,0 +1,161 @@
+"""The watershed measures (``area``, ``volume``; docs/design.md sections 12-13): each
+event's saliency against its definition (the superlevel-set components found by a
+breadth-first search), the cut's invariants, blockwise equal to in memory, and the
+masked gradient they are meant for."""
+
+import warnings
+from collections import deque
+
+import dask.array as da
+import numpy as np
+import pytest
+
+from volseg import segment_volume
+from volseg.fields import gradient_magnitude
+from volseg.morse import descending_complex, grid_offsets
+
+
+def _side(h, f, start, level, saddle, allowed):
+    """The vertices higher than the saddle (value, index) reachable from `start`."""
+    shape = f.shape
+    offsets = [np.array(o) for o in grid_offsets(f.ndim)]
+    seen, todo = {start}, deque([start])
+    while todo:
+        v = todo.popleft()
+        for o in offsets:
+            u = tuple(np.add(v, o))
+            if any(c < 0 or c >= n for c, n in zip(u, shape, strict=True)):
+                continue
+            flat = np.ravel_multi_index(u, shape)
+            if u not in seen and allowed[u] and (f[u], flat) > (level, saddle):
+                seen.add(u)
+                todo.append(u)
+    return seen
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_saliency_is_the_smaller_side_at_the_saddle(seed):
+    """Each side at event e: the superlevel-set components (above the saddle, in the
+    simulation-of-simplicity order) of the maxima that earlier events joined to it,
+    with the saddle vertex on its own cell's side. A vertex that is the saddle of
+    several events joins its components one event at a time, as a binary partition
+    tree does."""
+    rng = np.random.default_rng(seed)
+    f = rng.random((9, 8))
+    mask = np.ones(f.shape, bool)
+    mask[:2, :3] = False
+    h = descending_complex(f, mask=mask)
+    cells = np.asarray(h.cells)
+    area, volume = h.extinction("area"), h.extinction("volume")
+    assert len(area) == len(h.young) > 3
+    group = {m: {m} for m in range(len(h.maxima))}
+    for e in range(len(h.young)):
+        s, saddle = h.saddle_value[e], int(h.saddle[e])
+        where = np.unravel_index(saddle, f.shape)
+        sides = []
+        for cell in (h.source[e], h.target[e]):
+            side = set()
+            for m in group[cell]:
+                side |= _side(h, f, np.unravel_index(int(h.maxima[m]), f.shape), s, saddle,
+                              mask)
+            assert where not in side
+            own = int(cells[where]) in group[cell]
+            sides.append((len(side) + own, sum(f[v] - s for v in side)))
+        assert area[e] == min(a for a, _ in sides)
+        assert volume[e] == pytest.approx(min(v for _, v in sides), rel=1e-6, abs=1e-6)
+        joined = group[h.source[e]] | group[h.target[e]]
+        for m in joined:
+            group[m] = joined
+
+
+def test_cuts_are_nested_connected_and_counted():
+    rng = np.random.default_rng(5)
+    f = rng.random((12, 11, 10))
+    h = descending_complex(f)
+    for measure in ("area", "volume"):
+        previous = None
+        for k in (40, 17, 6, 1):
+            labels = h.segment(n_regions=k, measure=measure)
+            assert len(np.unique(labels)) == k
+            for region in range(1, k + 1):               # every region connected
+                from scipy import ndimage
+
+                _, parts = ndimage.label(labels == region, np.ones((3, 3, 3)))
+                assert parts == 1
+            if previous is not None:                     # a coarser cut joins regions
+                pairs = np.unique(np.stack([previous.ravel(), labels.ravel()]), axis=1)
+                assert len(np.unique(pairs[0])) == pairs.shape[1]
+            previous = labels
+        t = h.threshold_for(9, measure)
+        assert len(np.unique(h.segment(measure=measure, threshold=t))) == 9
+
+
+def test_blockwise_equals_in_memory_on_uneven_chunks():
+    rng = np.random.default_rng(3)
+    f = rng.random((19, 13, 11))
+    mask = rng.random(f.shape) > 0.15
+    h = descending_complex(f, mask=mask)
+    lazy = descending_complex(da.from_array(f, chunks=(7, 5, 6)),
+                              mask=da.from_array(mask, chunks=(7, 5, 6)))
+    for measure in ("area", "volume"):
+        np.testing.assert_array_equal(h.extinction(measure), lazy.extinction(measure))
+        np.testing.assert_array_equal(h.segment(n_regions=9, measure=measure),
+                                      np.asarray(lazy.segment(n_regions=9, measure=measure)))
+
+
+def test_segment_volume_blockwise_equal_for_every_field():
+    rng = np.random.default_rng(4)
+    x, y, z = np.meshgrid(*[np.arange(n) for n in (30, 26, 22)], indexing="ij")
+    volume = 60 + 100 * (((x - 10) ** 2 + (y - 12) ** 2 + (z - 11) ** 2) < 49) \
+        + 60 * (((x - 20) ** 2 + (y - 13) ** 2 + (z - 10) ** 2) < 36)
+    volume = np.clip(volume + rng.normal(0, 6, volume.shape), 0, 255).astype(np.uint8)
+    volume[:3] = 0                                         # a background slab: a mask
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for field in ("gradient", "value", "curvature"):
+            for measure in ("area", "volume"):
+                a = segment_volume(volume, field=field, measure=measure, n_regions=7)
+                b = segment_volume(da.from_array(volume, chunks=(11, 9, 13)), field=field,
+                                   measure=measure, n_regions=7)
+                np.testing.assert_array_equal(a.labels, np.asarray(b.labels))
+
+
+def test_gradient_default_measure_finds_the_parts():
+    """Touching flat-topped spheres on a graded background: the gradient's basins by
+    volume (the field's default) give the parts."""
+    rng = np.random.default_rng(0)
+    x, y, z = np.meshgrid(*[np.arange(n, dtype=float) for n in (40, 36, 30)], indexing="ij")
+    truth = np.zeros(x.shape, int)
+    volume = 40 + 1.0 * x
+    for label, (c, r, level) in enumerate([((12, 14, 15), 8, 160), ((25, 14, 15), 6, 220),
+                                           ((19, 25, 15), 7, 110)], 1):
+        inside = (x - c[0]) ** 2 + (y - c[1]) ** 2 + (z - c[2]) ** 2 <= r * r
+        volume, truth = np.where(inside, level, volume), np.where(inside, label, truth)
+    volume = np.clip(np.round(volume + rng.normal(0, 5, x.shape)), 0, 255).astype(np.uint8)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        seg = segment_volume(volume, field="gradient", n_regions=4, mask="none")
+    assert seg.measure == "volume"
+    from volseg.metrics import adjusted_rand_index
+
+    assert adjusted_rand_index(truth.ravel(), seg.labels.ravel()) > 0.8
+
+
+def test_masked_gradient_never_reaches_outside():
+    rng = np.random.default_rng(2)
+    values = rng.random((9, 8, 7))
+    mask = rng.random(values.shape) > 0.3
+    out = gradient_magnitude(values, (1.0, 2.0, 0.5), mask)
+    changed = values.copy()
+    changed[~mask] = rng.random(int((~mask).sum())) * 100     # outside: anything
+    np.testing.assert_array_equal(out, gradient_magnitude(changed, (1.0, 2.0, 0.5), mask))
+    np.testing.assert_array_equal(gradient_magnitude(values, (1.0, 2.0, 0.5)),
+                                  gradient_magnitude(values, (1.0, 2.0, 0.5),
+                                                     np.ones(values.shape, bool)))
+    lazy = gradient_magnitude(da.from_array(values, chunks=(4, 3, 5)), (1.0, 2.0, 0.5),
+                              da.from_array(mask, chunks=(4, 3, 5)))
+    np.testing.assert_array_equal(out, lazy.compute())
+    line = np.array([[[0.0, 1.0, 3.0, 9.0]]])              # one-sided at the mask's edge
+    inside = np.array([[[True, True, True, False]]])
+    np.testing.assert_array_equal(gradient_magnitude(line, (1, 1, 1), inside)[0, 0],
+                                  [1.0, 1.5, 2.0, 0.0])

@@ -1,0 +1,190 @@
+"""The watershed hierarchy's measures (docs/design.md sections 12 and 13): the area or
+volume of the two regions each merge event joins, read at its saddle, and the event's
+*saliency*, the smaller of the two, as in higra's ``watershed_hierarchy_by_area`` and
+``_by_volume`` (extinction values: Vachier and Meyer 1995, Najman and Schmitt 1996).
+
+At an event's saddle value s, the region on each side is the superlevel-set component
+{f >= s} holding its maximum: the vertices at or above s of the cells already joined
+to it by higher events (a vertex of a cell at or above s reaches the cell's maximum
+without going below s). Its area is their count (times the vertex weight), its volume
+the sum of f(v) - s over them. A vertex joins at the first event whose saddle is at or
+below it, its *rank* (the count of events with a higher saddle). `records` sums the
+vertices per (cell, rank), block by block, in fixed point on a grid (`STEPS` per range
+of the field, `volseg.morse._measures`), so the blocks' sums add up to the in-memory
+ones bit for bit; `saliency` then sweeps the events once, adding each rank's records to
+its region and reading both sides before joining them.
+
+A cut by saliency keeps the k - 1 events of largest saliency and merges the rest
+across their saddle edges (source, target): the regions are connected, and a larger
+threshold merges more (nested cuts), as a horizontal cut of higra's hierarchy.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+from .._distinct import slot_of
+from .._sizes import SizedByArrays
+from .._union_find import find_root
+from ._prune import masked_range
+
+__all__ = ["Basins", "records", "block_records", "joined", "saliency", "merge_order"]
+
+
+@dataclass(frozen=True)
+class Basins(SizedByArrays):
+    """The vertices of a field summed per (cell, rank): `cell`, `rank` (R,) int64,
+    `count` (R,) (vertices, or their weights on a mesh), `sums` (R,) of the vertices'
+    values in fixed point (`low` + `unit` x steps; on a mesh, weight x value as
+    floats), `scale` what one step of area x `unit` counts (the vertex weight)."""
+
+    cell: np.ndarray
+    rank: np.ndarray
+    count: np.ndarray
+    sums: np.ndarray
+    low: float
+    unit: float
+    scale: float
+
+    @property
+    def values(self) -> np.ndarray:
+        """(M,) each cell's area, as `MorseHierarchy.cell_measure` reports it."""
+        n = int(self.cell.max(initial=-1)) + 1
+        return np.bincount(self.cell, weights=self.count, minlength=n) * self.scale
+
+
+def ranks_of(values, saddle_value) -> np.ndarray:
+    """(N,) int64: the count of events with a saddle above each value (events in sweep
+    order, saddles non-increasing)."""
+    return np.searchsorted(-np.asarray(saddle_value, np.float64), -np.asarray(values),
+                           side="left").astype(np.int64)
+
+
+@numba.njit(cache=True, nogil=True)
+def _grown(keys, counts, sums, bits):
+    grown = np.full(1 << bits, -1, dtype=np.int64)
+    grown_counts = np.zeros(1 << bits, dtype=np.int64)
+    grown_sums = np.zeros(1 << bits, dtype=np.int64)
+    for k in range(len(keys)):
+        if keys[k] >= 0:
+            at = slot_of(grown, grown, keys[k], bits)
+            grown[at], grown_counts[at], grown_sums[at] = keys[k], counts[k], sums[k]
+    return grown, grown_counts, grown_sums
+
+
+@numba.njit(cache=True, nogil=True)
+def block_records(cells, field, negated_saddles, low, unit):
+    """(keys, counts, sums) of one block's vertices (flat; cells < 0 outside the mask):
+    key = cell x (E + 1) + rank, the vertex count and the fixed-point value sum per key,
+    through a hash table that doubles before it is half full."""
+    n_ranks = np.int64(len(negated_saddles) + 1)
+    bits = 10
+    keys = np.full(1 << bits, -1, dtype=np.int64)
+    counts = np.zeros(1 << bits, dtype=np.int64)
+    sums = np.zeros(1 << bits, dtype=np.int64)
+    used = 0
+    for i in range(len(cells)):
+        c = cells[i]
+        if c < 0:
+            continue
+        rank = np.searchsorted(negated_saddles, -field[i])          # side="left"
+        key = np.int64(c) * n_ranks + rank
+        slot = slot_of(keys, keys, key, bits)
+        if keys[slot] < 0:
+            if 2 * (used + 1) > len(keys):
+                bits += 1
+                keys, counts, sums = _grown(keys, counts, sums, bits)
+                slot = slot_of(keys, keys, key, bits)
+            keys[slot] = key
+            used += 1
+        counts[slot] += 1
+        sums[slot] += np.int64(np.floor((field[i] - low) / unit))
+    taken = keys >= 0
+    return keys[taken], counts[taken], sums[taken]
+
+
+def joined(parts, n_events: int, low: float, unit: float, scale: float) -> Basins:
+    """`Basins` from blocks' `block_records` (keys, counts, sums): summed per key, in
+    integers (exact in any order)."""
+    keys = np.concatenate([p[0] for p in parts]) if parts else np.zeros(0, np.int64)
+    counts = np.concatenate([p[1] for p in parts]) if parts else np.zeros(0, np.int64)
+    sums = np.concatenate([p[2] for p in parts]) if parts else np.zeros(0, np.int64)
+    distinct, at = np.unique(keys, return_inverse=True)
+    count = np.zeros(len(distinct), np.int64)
+    total = np.zeros(len(distinct), np.int64)
+    np.add.at(count, at, counts)
+    np.add.at(total, at, sums)
+    n_ranks = np.int64(n_events + 1)
+    return Basins(distinct // n_ranks, distinct % n_ranks, count, total, low, unit, scale)
+
+
+def records(cells, field, saddle_value, weight, unit_of, scale_of) -> Basins:
+    """`Basins` of a field in memory: fixed point on a grid (`weight` None or a
+    number; the step ``unit_of(low, high)``, an area step ``scale_of(weight, 1)``),
+    float sums weighted per vertex on a mesh (`weight` one per vertex)."""
+    cells, field = np.ravel(cells), np.ravel(field)
+    if weight is not None and np.ndim(weight) > 0:
+        inside = cells >= 0
+        n_ranks = np.int64(len(saddle_value) + 1)
+        key = cells[inside].astype(np.int64) * n_ranks + ranks_of(field[inside], saddle_value)
+        distinct, at = np.unique(key, return_inverse=True)
+        w = np.asarray(weight, np.float64)[inside]
+        count = np.bincount(at, weights=w, minlength=len(distinct))
+        sums = np.bincount(at, weights=w * field[inside], minlength=len(distinct))
+        return Basins(distinct // n_ranks, distinct % n_ranks, count, sums, 0.0, 1.0, 1.0)
+    low, high = masked_range(cells, field)
+    unit = unit_of(low, high)
+    part = block_records(cells, field, -np.asarray(saddle_value, np.float64), low, unit)
+    return joined([part], len(saddle_value), low, unit, scale_of(weight, 1.0))
+
+
+def saliency(basins: Basins, source, target, saddle_value, n_max: int,
+             volume: bool) -> np.ndarray:
+    """(E,) each event's saliency: the smaller area (or volume) of the two regions it
+    joins, at its saddle; int64 steps on a grid (times `basins.scale`, and `unit` for
+    a volume, to read it), float on a mesh."""
+    saddle_value = np.asarray(saddle_value, np.float64)
+    if basins.sums.dtype == np.int64:
+        level = np.floor((saddle_value - basins.low) / basins.unit).astype(np.int64)
+    else:
+        level = saddle_value
+    order = np.argsort(basins.rank, kind="stable")
+    out = np.empty(len(source), dtype=basins.sums.dtype)
+    _sweep(basins.cell[order], basins.rank[order], basins.count[order], basins.sums[order],
+           np.asarray(source, np.int64), np.asarray(target, np.int64), level, n_max,
+           volume, out)
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _sweep(cell, rank, count, sums, source, target, level, n_max, volume, out):
+    parent = np.arange(n_max)
+    area = np.zeros(n_max, dtype=count.dtype)
+    total = np.zeros(n_max, dtype=sums.dtype)
+    t = 0
+    for e in range(len(source)):
+        while t < len(rank) and rank[t] <= e:
+            r = find_root(parent, cell[t])
+            area[r] += count[t]
+            total[r] += sums[t]
+            t += 1
+        a, b = find_root(parent, source[e]), find_root(parent, target[e])
+        if volume:
+            left, right = total[a] - level[e] * area[a], total[b] - level[e] * area[b]
+        else:
+            left, right = area[a], area[b]
+        out[e] = min(left, right)
+        parent[a] = b
+        area[b] += area[a]
+        total[b] += total[a]
+
+
+def merge_order(saliency_of_events) -> np.ndarray:
+    """(E,) the events in the order a cut merges them: least saliency first, on a tie
+    the lower saddle (the later event) first, so a cut into k regions keeps the k - 1
+    last (docs/design.md section 12)."""
+    events = np.arange(len(saliency_of_events))
+    return np.lexsort((-events, saliency_of_events))
