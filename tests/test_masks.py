@@ -195,3 +195,64 @@ def test_low_mode_ignores_a_saturated_top_bin_and_the_shared_tooth_loses_its_air
     tooth = load_volume(str(volvis_dir / "tooth_103x94x161_uint8.raw")).data
     choice = foreground_mask(tooth, "auto")       # its air is noise about 77 of 255
     assert choice.used == "low mode: value>89" and 0.25 < choice.voxels / tooth.size < 0.32
+
+
+def chest_ct(shape=(120, 120, 24), seed=0):
+    """An axial chest CT slab as acquired (int16 HU): air at -1000 around the body,
+    fat, soft tissue, lungs, heart, spine and the table; the body runs through the
+    first and last slices, so it touches the volume's border there."""
+    rng = np.random.default_rng(seed)
+    x, y, z = np.meshgrid(*[np.linspace(-1, 1, n) for n in shape], indexing="ij")
+    hu = np.full(shape, -1000.0)
+    ring = (x / 0.85) ** 2 + (y / 0.6) ** 2
+    hu[ring <= 1] = -90
+    hu[ring <= 0.8] = 40
+    for side in (-1, 1):
+        hu[((x - side * 0.38) / 0.3) ** 2 + ((y + 0.05) / 0.38) ** 2 + (z / 2.5) ** 2 <= 1] = -850
+    hu[((x + 0.05) / 0.22) ** 2 + ((y + 0.1) / 0.2) ** 2 <= 1] = 45
+    hu[(x / 0.08) ** 2 + ((y - 0.45) / 0.08) ** 2 <= 1] = 700
+    table = (y > 0.7) & (y < 0.8) & (np.abs(x) < 0.98)
+    hu[table] = 200
+    hu += rng.normal(0, 15, shape)
+    return np.clip(np.round(hu), -1024, 3071).astype(np.int16), (ring <= 1) | table
+
+
+def test_auto_finds_the_air_around_an_axial_ct_slab():
+    """The end slices are body cross-sections: the border test reads the faces of two
+    of the three axes. The segmentation's default then labels the air 0 and keeps a
+    spread of regions (issue 55's chest CT)."""
+    import warnings
+
+    from volseg import segment_volume
+
+    volume, inside = chest_ct()
+    choice = foreground_mask(volume, "auto")
+    assert choice.used.startswith("low mode: value>")
+    air = (volume < -900) & ~inside
+    assert (~choice.mask[air]).mean() > 0.99 and choice.mask[inside].mean() > 0.98
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        seg = segment_volume(volume, n_regions=30)
+    assert (seg.labels[air] == 0).mean() >= 0.9
+    sizes = np.bincount(seg.labels[seg.labels > 0])[1:]
+    assert (sizes >= 0.01 * sizes.sum()).sum() >= 10
+    # Bright values on the faces of every axis: a field, no background found.
+    noise = np.random.default_rng(0).normal(0, 1, (30, 30, 30))
+    assert foreground_mask(noise, "auto").mask is None
+
+
+def test_the_cli_says_when_the_mask_leaves_out_non_zero_voxels(tmp_path, capsys):
+    from volseg.cli import main
+
+    volume, _ = chest_ct((40, 40, 8))
+    np.save(tmp_path / "chest.npy", volume)
+    assert main(["segment", str(tmp_path / "chest.npy"), "-o", str(tmp_path / "o"),
+                 "--regions", "5", "--no-vti"]) == 0
+    err = capsys.readouterr().err
+    assert "leaves out" in err and "of the non-zero voxels" in err
+    fuel = np.zeros((20, 20, 20), np.uint8)               # a zero background: no line
+    fuel[5:15, 5:15, 5:15] = np.random.default_rng(1).integers(1, 255, (10, 10, 10))
+    np.save(tmp_path / "fuel.npy", fuel)
+    assert main(["segment", str(tmp_path / "fuel.npy"), "-o", str(tmp_path / "f"),
+                 "--regions", "5", "--no-vti"]) == 0
+    assert "leaves out" not in capsys.readouterr().err

@@ -348,6 +348,21 @@ def result_to_files(volume, result, out_dir, *, force=False, wait=False,
     return done["info"]
 
 
+#: The share of a volume's non-zero voxels a mask may leave out without a line of its own.
+LEFT_OUT_SAID = 0.05
+
+
+def _say_left_out(say, name, mask, data) -> None:
+    """A line when the mask leaves out more than `LEFT_OUT_SAID` of the non-zero voxels
+    (a CT's air, a noisy background): not only the summary says so."""
+    if mask.mask is None or mask.voxels > (1 - LEFT_OUT_SAID) * mask.mask.size:
+        return
+    out, nonzero = mask.left_out(data)
+    if nonzero and out > LEFT_OUT_SAID * nonzero:
+        say(f"{name}: the mask ({mask.used}) leaves out {out / nonzero:.1%} of the non-zero "
+            "voxels; --mask none segments every voxel, --mask 'value>T' sets the threshold")
+
+
 def _write_result(paths, volume, result, data, value_range, outputs, *, checksum, started,
                   say, blockwise=None, noise=None, seed=0, requested_regions=None) -> dict:
     """The summary and files of `result` into an output set's staging `paths`."""
@@ -355,6 +370,7 @@ def _write_result(paths, volume, result, data, value_range, outputs, *, checksum
     frame = volume.frame or Frame.from_spacing(result.spacing)
     say(f"{name}: {result.n_regions} regions{result.mask.phrase()} from "
         f"{result.report.n_maxima} maxima; writing")
+    _say_left_out(say, name, result.mask, data)
     info = summary(result, name=name, source=volume.path, checksum=checksum,
                    files=volume.files, frame=frame, noise=noise, seed=seed,
                    requested_regions=requested_regions)

@@ -25,9 +25,10 @@ Rules (`foreground_mask`):
      triangle threshold T of the histogram (Zack et al. 1977, as scikit-image's
      `threshold_triangle`; without a saturated top bin) lies above the peak and leaves at least
      `AUTO_BACKGROUND_SHARE` of the voxels at or below it; and the voxels above T
-     reach the volume's border less than `AUTO_BORDER_RATIO` times as often as
-     they fill the volume (an object inside its background, not a field whose
-     bright values are everywhere);
+     reach the border less than `AUTO_BORDER_RATIO` times as often as they fill the
+     volume (an object inside its background, not a field whose bright values are
+     everywhere), on the faces of two of the three axes: an axial CT slab's end
+     slices are cross-sections of the body;
   3. else no mask (a simulation without background, a random field);
 - ``"nonzero"``: value above the volume's minimum;
 - ``"value>T"``, ``"value>=T"``, ``"value<T"``, ``"value<=T"``: a threshold;
@@ -82,6 +83,19 @@ class MaskChoice:
     def describe(self) -> dict:
         """The choice as the summary records it."""
         return {"rule": self.rule, "used": self.used, "voxels": self.voxels}
+
+    def left_out(self, data) -> tuple[int, int]:
+        """(non-zero voxels of `data` outside the mask, non-zero voxels of `data`): what
+        a mask takes from the segmentation beyond an empty background (one pass)."""
+        if self.mask is None:
+            return 0, 0
+        nonzero = data != 0
+        counts = ((nonzero & ~self.mask).sum(), nonzero.sum())
+        if hasattr(counts[0], "dask"):
+            import dask
+
+            counts = dask.compute(*counts)
+        return int(counts[0]), int(counts[1])
 
     def phrase(self) -> str:
         """" in a <used> mask of <voxels> voxels", or "" without a mask (for messages)."""
@@ -249,7 +263,10 @@ def _low_mode(data, lazy: bool, lowest: float, highest: float):
 
 
 def _border_share_above(data, threshold, lazy: bool) -> float:
-    """The share of the volume's border voxels (its six faces) above `threshold`."""
+    """The share of the volume's border voxels above `threshold`, on the faces of the
+    middle one of the three axes (each axis's two faces taken together): an object
+    needs background on the faces of two axes, not three, so that an axial CT slab,
+    whose first and last slices cut through the body, still has its air found."""
     faces = [data[index] for axis in range(3) for index in
              ((slice(None),) * axis + (0,), (slice(None),) * axis + (-1,))]
     counts = [(face > threshold).sum() for face in faces]
@@ -257,7 +274,9 @@ def _border_share_above(data, threshold, lazy: bool) -> float:
         import dask
 
         counts = dask.compute(*counts)
-    return float(sum(int(c) for c in counts)) / sum(face.size for face in faces)
+    shares = [(int(counts[2 * a]) + int(counts[2 * a + 1]))
+              / (faces[2 * a].size + faces[2 * a + 1].size) for a in range(3)]
+    return float(np.median(shares))
 
 
 def _range(data, lazy: bool) -> tuple:
