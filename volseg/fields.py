@@ -49,7 +49,8 @@ class Field:
     complex is built on ``sign * field``. `halo`: the voxels of halo a block needs.
     `needs_scale`: the field reads the graph's value scale (the curvature). `measure`:
     the cut measure by default (`volseg.morse.MEASURE_REGISTRY`), chosen by measurement
-    (docs/guide/useful-regions.md).
+    (docs/guide/useful-regions.md); `fallback`: the measure a count cut by that default
+    falls back to when its cut is degenerate (`volseg.metrics.region_spread`), or None.
     """
 
     name: str
@@ -61,6 +62,7 @@ class Field:
     needs_scale: bool
     measure: str
     summary: str
+    fallback: str | None = None
 
 
 def normalised(values, span):
@@ -150,7 +152,7 @@ FIELD_REGISTRY = Registry("field", [
     Field("curvature", "curvature", ("mean-curvature",), _curvature, 1.0, 1, True,
           "hypervolume", "mean curvature of the graph in R^4: territories around peaks"),
     Field("gradient", "gradient magnitude", ("edges", "watershed"), _gradient, -1.0, 1,
-          False, "volume", "basins of |grad f|: regions bounded by edges"),
+          False, "volume", "basins of |grad f|: regions bounded by edges", "area"),
     Field("value", "value", ("intensity", "blobs"), _value, 1.0, 0, False, "hypervolume",
           "the values: regions around bright blobs (|f| on a signed map)"),
 ])

@@ -371,6 +371,8 @@ def _write_result(paths, volume, result, data, value_range, outputs, *, checksum
     say(f"{name}: {result.n_regions} regions{result.mask.phrase()} from "
         f"{result.report.n_maxima} maxima; writing")
     _say_left_out(say, name, result.mask, data)
+    if result.cut.get("measure_rule", "").startswith(f"{result.measure}:"):
+        say(f"{name}: cut by {result.cut['measure_rule']}")
     info = summary(result, name=name, source=volume.path, checksum=checksum,
                    files=volume.files, frame=frame, noise=noise, seed=seed,
                    requested_regions=requested_regions)

@@ -226,12 +226,15 @@ class CutRequest:
     auto: bool
     measure: str = PERSISTENCE.name
     min_component: float = 0.0
+    fallback: str | None = None
 
     @classmethod
     def checked(cls, min_persistence=None, n_regions=None, *, measure=None,
-                threshold=None, min_component=0.0) -> CutRequest:
+                threshold=None, min_component=0.0, fallback=None) -> CutRequest:
         """The checked cut; `measure` None: persistence when `min_persistence` is
-        given, else `DEFAULT_MEASURE`."""
+        given, else `DEFAULT_MEASURE`. `fallback`: the measure a count cut takes
+        instead when its own cut is degenerate (a field's default: `Field.fallback`);
+        a threshold cut keeps its measure (the threshold is in its units)."""
         if measure is None:
             measure = PERSISTENCE.name if min_persistence is not None else DEFAULT_MEASURE
         auto = isinstance(n_regions, str) and n_regions == "auto"
@@ -239,13 +242,21 @@ class CutRequest:
             min_persistence, None if auto else n_regions, measure, threshold)
         if threshold is None and n_regions is None and not auto:
             n_regions = DEFAULT_REGIONS
+        if fallback is not None:
+            fallback = get_measure(fallback).name if threshold is None else None
         return cls(threshold, n_regions, auto, measure, _validate.share(min_component,
-                                                                        "min_component"))
+                                                                        "min_component"),
+                   fallback)
 
     @property
     def min_persistence(self) -> float | None:
         """The threshold of a persistence cut (None for another measure)."""
         return None if get_measure(self.measure).pruned else self.threshold
+
+    @property
+    def auto_range(self) -> tuple:
+        """The counts ``auto`` chooses from (`AUTO_REGION_RANGE`)."""
+        return AUTO_REGION_RANGE
 
     def of(self, hierarchy: MorseHierarchy, masked: bool | None = None) -> dict:
         """The keyword arguments of ``hierarchy.segment`` / ``region_of_maximum`` for
@@ -253,7 +264,8 @@ class CutRequest:
         were masked, default whether it has a mask)."""
         masked = hierarchy.mask is not None if masked is None else masked
         min_component = self.min_component if masked else 0.0
-        n_regions = (hierarchy.largest_gap(AUTO_REGION_RANGE, self.measure, min_component)
+        n_regions = (hierarchy.largest_gap(AUTO_REGION_RANGE, self.measure, min_component,
+                                           fallback=DEFAULT_REGIONS)
                      if self.auto else self.n_regions)
         return {"n_regions": n_regions, "measure": self.measure, "threshold": self.threshold,
                 "min_component": min_component}
@@ -306,11 +318,13 @@ class SegmentRequest:
                 chunks=None, field="curvature") -> SegmentRequest:
         """The request with every option checked; a ValueError names the option."""
         entry = field_entry(field)
+        fallback = None
         if measure is None and min_persistence is None:
-            measure = entry.measure
+            measure, fallback = entry.measure, entry.fallback
         cut = CutRequest.checked(
             min_persistence, n_regions, threshold=threshold, measure=measure,
-            min_component=DEFAULT_MIN_COMPONENT if min_component is None else min_component)
+            min_component=DEFAULT_MIN_COMPONENT if min_component is None else min_component,
+            fallback=fallback)
         sigma = None if smooth_sigma is None else _validate.smooth(smooth_sigma)
         if isinstance(mask, str):
             check_rule(mask)
@@ -485,9 +499,39 @@ def _morse_and_cut(field, cut: CutRequest, timings, *, mask=None, adjacency=None
             hierarchy = hierarchy.with_vertex_weight(vertex_weight)
     with _timed(timings, "cut", storage):
         labels, report = cut_of(hierarchy, cut)
+        if cut.fallback is not None:
+            labels, report = _unless_degenerate(hierarchy, cut, labels, report)
     with _timed(timings, "labels", storage):
         labels = storage.labels(labels, report.n_regions)
     return hierarchy, labels, report
+
+
+def _unless_degenerate(hierarchy, cut: CutRequest, labels, report: CutReport) -> tuple:
+    """The cut by `cut.fallback` instead when the cut by the field's default measure is
+    degenerate (`volseg.metrics.region_spread`: one region of most of the volume and
+    specks, as the volume hierarchy leaves a single homogeneous object); the report
+    records the rule either way (``measure_rule``)."""
+    from .metrics import region_spread
+
+    sizes = _label_sizes(labels, report.n_regions)
+    spread = region_spread(sizes[1:]) if sizes[1:].sum() else {"degenerate": False}
+    rule = f"{cut.measure} (the field's default)"
+    if spread["degenerate"]:
+        rule = (f"{cut.fallback}: by {cut.measure} the cut was degenerate (largest region "
+                f"{spread['largest_share']:.0%}, {spread['regions_at_least_1_percent']} of "
+                f"{report.n_regions} regions >= 1 %)")
+        labels, report = cut_of(hierarchy, dataclasses.replace(cut, measure=cut.fallback,
+                                                               fallback=None))
+    return labels, dataclasses.replace(report, record={**report.record, "measure_rule": rule})
+
+
+def _label_sizes(labels, n_regions: int) -> np.ndarray:
+    """Voxels per label 0..k of labels in memory or lazy (one pass)."""
+    if not _validate.is_lazy(labels):
+        return np.bincount(np.asarray(labels).ravel(), minlength=n_regions + 1)
+    import dask.array as da
+
+    return da.bincount(labels.ravel(), minlength=n_regions + 1).compute()
 
 
 def _cut_fields(report: CutReport) -> dict:

@@ -110,6 +110,21 @@ def files_sha256(paths) -> str | None:
     return digest.hexdigest()
 
 
+def _auto_phrase(cut: dict, measure: str) -> str:
+    """How ``--regions auto`` chose its count, with the evidence it read."""
+    evidence = cut.get("auto_evidence") or {}
+    if evidence.get("n_regions") is None:
+        return "auto: fewer maxima than the 20-40 window; all of them"
+    ratio, needed = evidence["ratio"], evidence["needed"]
+    if evidence["n_regions"] == cut["n_regions"] and ratio >= needed:
+        return (f"auto: the {measure} gap at {evidence['n_regions']} regions stands out: "
+                f"{ratio:.2f}x the step of a power law fitted to the 20-40 window, "
+                f"{needed:.2f}x needed")
+    return (f"auto: no {measure} gap stands out for 20-40 regions (the most, at "
+            f"{evidence['n_regions']}, is {ratio:.2f}x a power law's step, "
+            f"{needed:.2f}x needed): the default count")
+
+
 def result_summary(result) -> dict:
     """The part of a summary every `Segmentation` has, volume or mesh: operator, cut,
     persistence, regions and their spread (`volseg.metrics.region_spread`), timings."""
@@ -121,10 +136,11 @@ def result_summary(result) -> dict:
         "field": getattr(result, "field", "curvature"),
         "operator": result.operator,
         "n_regions": result.n_regions,
-        "cut": f"auto: the largest {measure} gap for 20-40 regions" if result.cut.get("auto")
+        "cut": _auto_phrase(result.cut, measure) if result.cut.get("auto")
         else (f"{measure} threshold" if result.cut.get("threshold") is not None
               else "region count"),
         "measure": measure,
+        "measure_rule": result.cut.get("measure_rule", "as asked"),
         "threshold": result.threshold,
         "min_persistence": result.min_persistence,
         "min_component": result.cut.get("min_component", 0.0),
