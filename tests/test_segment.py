@@ -103,13 +103,32 @@ def test_smooth_zero_is_bit_identical_and_smoothing_removes_the_checkerboard():
         segment_volume(data, smooth_sigma=-1)
 
 
-def test_regions_auto_picks_the_largest_gap_in_the_papers_range():
+def test_regions_auto_takes_a_gap_only_where_it_stands_out():
+    """`auto` on a power law's curve gives the default count, saying so with the
+    evidence; a planted gap four times the law's step plus the significance is taken.
+    The criterion is checked against its definition: each log gap over the step of a
+    power law fitted (log-log) to the window."""
+    from volseg.morse._hierarchy import gap_factor, widest_gap_count
+
+    ranks = np.arange(1, 60, dtype=float)
+    law = 100.0 * ranks ** -1.3                          # a power law: nothing stands out
+    assert widest_gap_count(law, len(law), 1, (20, 40), 60, fallback=30) == 30
+    assert widest_gap_count(law, len(law), 1, (20, 40), 60) == 20   # the widest: the edge
+    planted = law.copy()
+    planted[25:] *= np.exp(-1.3 * np.log(26 / 25) * (gap_factor(21) + 4))
+    assert widest_gap_count(planted, len(planted), 1, (20, 40), 60, fallback=30) == 26
     result = segment_volume(demo_volume(32), n_regions="auto", measure="persistence",
                             mask=None, smooth_sigma=0)
-    assert 20 <= result.n_regions <= 40 and result.cut["auto"]
+    evidence = result.cut["auto_evidence"]
     p = np.sort(result.hierarchy.event_persistence)[::-1]
-    gaps = {k: np.log(p[k - 2]) - np.log(p[k - 1]) for k in range(20, 41)}
-    assert result.n_regions == max(gaps, key=gaps.get)
+    counts = np.arange(20, 41)
+    gaps = np.log(p[counts - 2]) - np.log(p[counts - 1])
+    slope = -np.polyfit(np.log(np.arange(19, 41)), np.log(p[18:40]), 1)[0]
+    ratio = gaps / (slope * np.log(counts / (counts - 1)))
+    assert evidence["n_regions"] == counts[np.argmax(ratio)]
+    assert evidence["ratio"] == pytest.approx(ratio.max())
+    stands_out = evidence["ratio"] >= evidence["needed"]
+    assert result.n_regions == (evidence["n_regions"] if stands_out else 30)
 
 
 @pytest.mark.parametrize("rounds", [2.5, -1, True, "3"])

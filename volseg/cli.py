@@ -44,6 +44,16 @@ def _get_parser() -> argparse.ArgumentParser:
     return parser
 
 
+_MEASURE_HELP = (
+    "what decides which regions survive the cut (default: the field's, "
+    f"{DEFAULT_MEASURE} for curvature and value, volume for gradient, area where "
+    "volume's cut is degenerate; persistence with --min-persistence): persistence keeps "
+    "the tallest peaks (on 8-bit or noisy data, voxel-sized spikes); size the largest "
+    "regions (the smallest merges into its neighbour across their highest saddle); "
+    "hypervolume weighs size by height (Carr et al. 2004); area and volume are the "
+    "watershed hierarchies (higra's): the smaller side's size or volume at each saddle")
+
+
 def _add_segment(sub):
     seg = sub.add_parser("segment", help="segment volume files or named datasets")
     seg.add_argument("inputs", nargs="+", metavar="INPUT",
@@ -54,8 +64,9 @@ def _add_segment(sub):
     cut = seg.add_mutually_exclusive_group()
     cut.add_argument("--regions", type=_regions, metavar="K",
                      help=f"number of regions (default {DEFAULT_REGIONS}; with a mask, foreground "
-                     f"regions), or 'auto': the count in {AUTO_REGION_RANGE[0]}-"
-                     f"{AUTO_REGION_RANGE[1]} at the largest persistence gap")
+                     f"regions), or 'auto': a count in {AUTO_REGION_RANGE[0]}-"
+                     f"{AUTO_REGION_RANGE[1]} where the measure's curve has a gap that "
+                     f"stands out from a power law, else {DEFAULT_REGIONS}")
     cut.add_argument("--min-persistence", type=float, metavar="T",
                      help="instead of a count: merge every peak of the curvature less "
                      "persistent than T (the persistence measure only)")
@@ -69,13 +80,7 @@ def _add_segment(sub):
                      "hierarchy; best on anatomy and other piecewise-smooth scans), value "
                      "(bright blobs of the values; |value| on a signed map), or a volume "
                      "file of the same grid to cut as it is")
-    seg.add_argument("--measure", choices=MEASURES, default=None,
-                     help=f"what decides which regions survive the cut (default "
-                     f"{DEFAULT_MEASURE}; persistence with --min-persistence): persistence "
-                     "keeps the tallest curvature peaks (on 8-bit or noisy data, voxel-sized "
-                     "spikes); size the largest regions (the "
-                     "smallest merges into its neighbour across their highest saddle); "
-                     "hypervolume weighs size by height (Carr et al. 2004)")
+    seg.add_argument("--measure", choices=MEASURES, default=None, help=_MEASURE_HELP)
     seg.add_argument("--min-component", type=float, default=None, metavar="SHARE",
                      help="mask components smaller than this share of the mask are labelled 0 "
                      f"and use no region (default {DEFAULT_MIN_COMPONENT:g}; 0 keeps all)")

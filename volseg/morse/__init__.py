@@ -52,14 +52,14 @@ from __future__ import annotations
 from ._build import descending_complex
 from ._curve import CurveSample, curve_sample
 from ._graph import grid_offsets
-from ._hierarchy import MorseHierarchy, check_cut, check_measure_cut
+from ._hierarchy import AUTO_GAP_SIGNIFICANCE, MorseHierarchy, check_cut, check_measure_cut
 from ._measures import MEASURE_REGISTRY, MEASURES, PERSISTENCE, SIZE, Measure, get_measure
 from .cuts import CutReport, cut_of
 
 __all__ = ["descending_complex", "MorseHierarchy", "grid_offsets", "check_cut",
            "check_measure_cut", "Measure", "MEASURE_REGISTRY", "MEASURES", "PERSISTENCE",
            "SIZE", "get_measure", "CurveSample", "curve_sample", "CutReport", "cut_of",
-           "entry_kernels"]
+           "entry_kernels", "AUTO_GAP_SIGNIFICANCE"]
 
 
 def entry_kernels() -> list:

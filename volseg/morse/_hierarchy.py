@@ -18,7 +18,7 @@ from ._basins import Basins
 from ._graph import grid_offsets
 from ._measures import SIZE, get_measure
 
-__all__ = ["MorseHierarchy", "check_cut", "check_measure_cut"]
+__all__ = ["MorseHierarchy", "check_cut", "check_measure_cut", "AUTO_GAP_SIGNIFICANCE"]
 
 
 def check_cut(min_persistence=None, n_regions=None, *, name="min_persistence") -> tuple:
@@ -282,11 +282,15 @@ class MorseHierarchy(SizedByArrays):
         return self.n_components + len(p) - np.searchsorted(p, np.asarray(thresholds), side="left")
 
     def largest_gap(self, region_range=(20, 40), measure: str = "persistence",
-                    min_component: float = 0.0) -> int:
+                    min_component: float = 0.0, fallback: int | None = None) -> int:
         """The region count k in `region_range` (inclusive) whose cut sits in the widest
         gap between consecutive extinctions of `measure`, on a log scale: the most
         clearly separated simplification (among the components `min_component`
-        keeps). Falls back to the range's ends when the hierarchy has fewer maxima."""
+        keeps). Falls back to the range's ends when the hierarchy has fewer maxima.
+        Without `fallback`, the widest gap; with it, the gap that stands out most
+        from a power law fitted to the window (`gap_evidence`) if it is larger than
+        such a law makes in 95 % of windows (`AUTO_GAP_SIGNIFICANCE`), else
+        `fallback`."""
         try:
             lo, hi = (int(r) for r in region_range)
         except (TypeError, ValueError):
@@ -296,7 +300,14 @@ class MorseHierarchy(SizedByArrays):
             raise ValueError(f"`region_range` must be counts 1 <= lo <= hi, got {region_range!r}")
         extinction, components = self.curve(measure, min_component)
         p = np.sort(extinction)[::-1]
-        return widest_gap_count(p, len(p), components, (lo, hi), len(self.maxima))
+        return widest_gap_count(p, len(p), components, (lo, hi), len(self.maxima), fallback)
+
+    def gap_evidence(self, region_range, measure: str = "persistence",
+                     min_component: float = 0.0) -> dict:
+        """What `largest_gap` with a fallback read (`gap_evidence`)."""
+        extinction, components = self.curve(measure, min_component)
+        p = np.sort(extinction)[::-1]
+        return gap_evidence(p, len(p), components, tuple(region_range))
 
     def component_of_maximum(self) -> NDArray[np.int32]:
         """(M,) the connected component of the graph (of the mask) of each maximum,
@@ -520,22 +531,67 @@ def midpoint_threshold(p, n_events: int, components: int, n_regions: int) -> flo
     return 0.5 * float(p[keep - 1] + p[keep])
 
 
-def widest_gap_count(p, n_events: int, components: int, region_range, n_maxima: int) -> int:
+#: ``auto`` takes a gap only when a power law fitted to the window's extinctions would
+#: make one as large (relative to its own step there) in fewer than this share of
+#: windows. Real scans' curves are power laws, whose widest step (log scale) always
+#: falls at the window's low edge; the spacings of a power law's order statistics, in
+#: units of its step, are about exponential, so the largest of n exceeds
+#: -log(1 - (1 - share)^(1/n)) with probability `share` (6.0 for the 21 counts 20-40).
+AUTO_GAP_SIGNIFICANCE = 0.05
+
+
+def gap_factor(n: int) -> float:
+    """The ratio a gap must reach among `n` to stand out (`AUTO_GAP_SIGNIFICANCE`)."""
+    return float(-np.log(1.0 - (1.0 - AUTO_GAP_SIGNIFICANCE) ** (1.0 / max(n, 1))))
+
+
+def gap_evidence(p, n_events: int, components: int, region_range) -> dict:
+    """The gap that stands out most between consecutive extinctions `p` (sorted
+    decreasing, the first of `n_events`) for a count in `region_range`: each log gap
+    divided by the step of the power law p_r ~ r^-a fitted (least squares, log-log) to
+    the window's extinctions. ``n_regions`` at it, its ``gap``, the power law's
+    ``expected`` step there and their ``ratio``; ``widest``, the count at the widest
+    gap; ``needed``, the ratio that stands out (`gap_factor`); None without a count in
+    the window."""
+    lo, hi = region_range
+    ranks = np.arange(max(lo, components), hi + 1) - components      # events kept
+    ranks = ranks[(ranks >= 1) & (ranks < n_events)]
+    if not len(ranks):
+        return {"n_regions": None, "gap": None, "expected": None, "ratio": None,
+                "widest": None, "needed": None}
+    upper, lower = p[ranks - 1], p[ranks]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        gaps = np.where(lower > 0, np.log(upper) - np.log(lower), np.inf)
+        window = np.r_[upper, lower[-1]]
+        r = np.arange(ranks[0], ranks[-1] + 2, dtype=np.float64)
+        fit = window > 0
+        slope = (-np.polyfit(np.log(r[fit]), np.log(window[fit]), 1)[0]
+                 if fit.sum() >= 2 else 0.0)
+        expected = max(slope, 0.0) * np.log((ranks + 1) / ranks)
+        ratio = np.where(expected > 0, gaps / expected, np.where(gaps > 0, np.inf, 0.0))
+    best = int(np.argmax(ratio))
+    return {"n_regions": int(ranks[best] + components), "gap": float(gaps[best]),
+            "expected": float(expected[best]), "ratio": float(ratio[best]),
+            "widest": int(ranks[int(np.argmax(gaps))] + components),
+            "needed": gap_factor(len(ranks))}
+
+
+def widest_gap_count(p, n_events: int, components: int, region_range, n_maxima: int,
+                     fallback: int | None = None) -> int:
     """`MorseHierarchy.largest_gap` from the extinctions sorted decreasing: `p`, the
     first of `n_events` of them (at least ``region_range[1] + 1`` where there are as
-    many), with a checked `region_range`."""
+    many), with a checked `region_range`. With `fallback`, that count (within the
+    range) unless the gap that stands out most is `stands out (`gap_evidence`,
+    `AUTO_GAP_SIGNIFICANCE`)."""
     lo, hi = region_range
-    best, best_gap = None, -np.inf
-    for k in range(max(lo, components), hi + 1):
-        keep = k - components
-        if keep < 1 or keep >= n_events:
-            continue
-        gap = np.log(p[keep - 1]) - np.log(p[keep]) if p[keep] > 0 else np.inf
-        if gap > best_gap:
-            best, best_gap = k, gap
-    if best is None:
+    evidence = gap_evidence(p, n_events, components, region_range)
+    if evidence["n_regions"] is None:
         return max(min(hi, n_maxima), 1)
-    return best
+    if fallback is None:
+        return evidence["widest"]
+    if not evidence["ratio"] >= evidence["needed"]:
+        return max(min(min(max(fallback, lo), hi), n_maxima), 1)
+    return evidence["n_regions"]
 
 
 def _all_but_most_persistent(p, young, keep):

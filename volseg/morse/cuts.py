@@ -60,10 +60,14 @@ def record_of(cut, asked: dict, k: int, hierarchy) -> dict:
     of a count)."""
     threshold = (float(cut.threshold) if cut.threshold is not None
                  else hierarchy.threshold_for(k, cut.measure, asked["min_component"]))
-    return {"measure": cut.measure, "threshold": cut.threshold,
-            "min_persistence": cut.min_persistence, "n_regions": asked["n_regions"],
-            "auto": cut.auto, "cut_threshold": threshold,
-            "min_component": asked["min_component"]}
+    record = {"measure": cut.measure, "threshold": cut.threshold,
+              "min_persistence": cut.min_persistence, "n_regions": asked["n_regions"],
+              "auto": cut.auto, "cut_threshold": threshold,
+              "min_component": asked["min_component"]}
+    if cut.auto:
+        record["auto_evidence"] = hierarchy.gap_evidence(cut.auto_range, cut.measure,
+                                                         asked["min_component"])
+    return record
 
 
 def report_of(hierarchy, masked: bool, cut) -> tuple:

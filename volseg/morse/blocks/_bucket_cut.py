@@ -30,7 +30,7 @@ import numpy as np
 from ..._distinct import distinct
 from ..._sizes import SizedByArrays
 from ..._task_graph import TaskGraph
-from .._hierarchy import events_kept, midpoint_threshold, widest_gap_count
+from .._hierarchy import events_kept, gap_evidence, midpoint_threshold, widest_gap_count
 from . import _ranks
 from ._buckets import Bucket, batches, by_bucket, first_ids
 
@@ -70,11 +70,18 @@ class Head(SizedByArrays):
         if measure != self.measure:
             raise ValueError(f"this head orders the events by {self.measure}, not {measure!r}")
 
-    def largest_gap(self, region_range, measure="persistence", min_component=0.0) -> int:
+    def largest_gap(self, region_range, measure="persistence", min_component=0.0,
+                    fallback=None) -> int:
         self._same(measure)
         self._enough(region_range[1])
         return widest_gap_count(self.values, self.n_events, self.n_components,
-                                region_range, self.n_maxima)
+                                region_range, self.n_maxima, fallback)
+
+    def gap_evidence(self, region_range, measure="persistence", min_component=0.0) -> dict:
+        self._same(measure)
+        self._enough(region_range[1])
+        return gap_evidence(self.values, self.n_events, self.n_components,
+                            tuple(region_range))
 
     def threshold_for(self, n_regions, measure="persistence", min_component=0.0) -> float:
         self._same(measure)
