@@ -92,6 +92,20 @@ def test_the_cli_writes_the_field_it_used_and_says_so(tmp_path, capsys, rng):
     assert summary["field"] == "gradient" and summary["n_regions"] == 4
     assert (tmp_path / "o" / "p_gradient.nii.gz").exists()
     assert not (tmp_path / "o" / "p_curvature.nii.gz").exists()
+    # The ParaView image's array and the OME-Zarr image are named for the field.
+    import zarr
+    from vtkmodules.vtkIOXML import vtkXMLImageDataReader
+
+    reader = vtkXMLImageDataReader()
+    reader.SetFileName(str(tmp_path / "o" / "p_volumes.vti"))
+    reader.Update()
+    data = reader.GetOutput().GetPointData()
+    names = {data.GetArray(i).GetName() for i in range(data.GetNumberOfArrays())}
+    assert names == {"labels", "gradient", "values"}
+    from volseg.io.zarr_store import multiscales_of
+
+    attrs = zarr.open_group(str(tmp_path / "o" / "p_segmentation.ome.zarr"), mode="r").attrs
+    assert multiscales_of(attrs.asdict())[0]["name"] == "gradient"
     assert main(["segment", str(source), "-o", str(tmp_path / "b"), "-q", "--json",
                  "--field", "gradient", "--regions", "4", "--mask", "none", "--chunks", "8"]) == 0
     blockwise = json.loads(capsys.readouterr().out)

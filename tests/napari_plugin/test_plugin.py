@@ -170,6 +170,24 @@ def test_widget_labels_equal_segment_volume_and_the_slider_recuts(make_napari_vi
     assert widget.live.result.labels[tuple(info["maximum"])] == 2
 
 
+def test_widget_segments_the_field_chosen_and_names_it(make_napari_viewer, qtbot):
+    """The field is a choice of the widget; the measure's first entry is the field's
+    default; the field's layer is named for it and hidden (it would hide the image)."""
+    viewer = make_napari_viewer()
+    data = demo_volume(32)
+    viewer.add_image(data, name="blobs")
+    widget = _widget(viewer)
+    result = _run(qtbot, widget, regions=7, field="gradient")
+    expected = segment_volume(data, field="gradient", n_regions=7)
+    assert result.field == "gradient" and result.measure == expected.measure
+    assert np.array_equal(widget.labels_layer.data, expected.labels)
+    assert widget.curvature_layer.name == "blobs gradient"
+    assert not widget.curvature_layer.visible
+    widget.measure.setCurrentText("persistence")
+    widget.measure.setCurrentText(widget.measure.itemText(0))      # back to the default
+    assert widget.live.result.measure == "volume"
+
+
 def _count_cut(result, k):
     return {"n_regions": k, "measure": result.measure,
             "min_component": result.cut["min_component"]}

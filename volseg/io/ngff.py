@@ -129,9 +129,10 @@ def _written_levels(levels, group, axes, transforms, name) -> list:
     return writes
 
 
-def write_ngff(path, labels, curvature, frame: Frame) -> Path:
+def write_ngff(path, labels, curvature, frame: Frame, name: str = "curvature") -> Path:
     """Write `labels` and `curvature` ((X, Y, Z) numpy or Dask arrays, one shape) as
-    the OME-Zarr image `path` (a new folder; its parent must exist)."""
+    the OME-Zarr image `path` (a new folder; its parent must exist); `name`: the
+    image's multiscale name, the field it holds."""
     import dask
     import dask.array as da
     import zarr
@@ -159,7 +160,7 @@ def write_ngff(path, labels, curvature, frame: Frame) -> Path:
     mean_transforms = [_transforms(spacing * 2**i, origin + spacing * (2**i - 1) / 2)
                        for i in range(levels + 1)]
     root = zarr.open_group(str(path), mode="w-")
-    writes = _written_levels(mean_levels, root, axes, mean_transforms, "curvature")
+    writes = _written_levels(mean_levels, root, axes, mean_transforms, name)
     writes += _written_levels(label_levels, root.require_group("labels/regions"), axes,
                               label_transforms, "regions")
     dask.compute(*writes)

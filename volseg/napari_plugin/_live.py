@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import _validate
+from ..fields import get_field
 from ..segment import Segmentation, SegmentRequest, run_stages, segment_volume
 from ._layers import LayerVolume
 
@@ -37,12 +38,13 @@ class Options:
     operator: str = "weighted"
     smooth_sigma: float | None = None       # None: `volseg.segment.auto_smoothing`
     mask: str = "auto"
-    measure: str = "hypervolume"
+    measure: str | None = None              # None: the field's (`volseg.fields.Field`)
     n_regions: int | str = 30
+    field: str = "curvature"
 
     def keywords(self) -> dict:
         return {"operator": self.operator, "smooth_sigma": self.smooth_sigma, "mask": self.mask,
-                "measure": self.measure, "n_regions": self.n_regions}
+                "measure": self.measure, "n_regions": self.n_regions, "field": self.field}
 
 
 class LiveSegmentation:
@@ -99,9 +101,12 @@ class LiveSegmentation:
         stays the same object, and `snapshot` gives a copy that later cuts leave alone."""
         return self._recut(n_regions, threshold=threshold, measure=self.result.measure)
 
-    def set_measure(self, measure: str):
-        """Cut by another measure (docs/design.md section 12), keeping the region count:
-        the hierarchy has every measure, nothing is recomputed."""
+    def set_measure(self, measure: str | None):
+        """Cut by another measure (docs/design.md section 12; None: the field's),
+        keeping the region count: the hierarchy has every measure, nothing is
+        recomputed."""
+        if measure is None:
+            measure = get_field(self.options.field).measure
         return self._recut(self.result.n_regions, measure=measure)
 
     def _recut(self, n_regions, **cut):

@@ -38,13 +38,16 @@ from qtpy.QtWidgets import (
 )
 
 from ..curvature import OPERATORS
+from ..fields import FIELDS
 from ..morse import MEASURES
-from ..segment import DEFAULT_MEASURE, DEFAULT_REGIONS
+from ..segment import DEFAULT_REGIONS
 from ._layers import LayerVolume
 from ._live import Cancelled, LiveSegmentation, Options
 
 __all__ = ["SegmentWidget"]
 
+#: The measure entry that leaves the choice to the field (`volseg.fields.Field.measure`).
+FIELD_DEFAULT = "field's default"
 #: Stages a run reports (`volseg.segment.run_stages`): the progress bar's steps.
 STAGES = ("curvature", "morse", "cut", "labels")
 #: Positions of the sliders: log scales of the region count (1 to every maximum) and
@@ -111,14 +114,20 @@ class SegmentWidget(QWidget):
         self.smooth.setValue(-1.0)
         self.mask = QLineEdit("auto")
         self.mask.setToolTip("auto, none, nonzero, otsu or value>T")
+        self.field = QComboBox()
+        self.field.addItems(list(FIELDS))
+        self.field.setToolTip("curvature: territories around peaks (blobs); gradient: "
+                              "basins bounded by edges (anatomy); value: bright blobs")
         self.measure = QComboBox()
-        self.measure.addItems(list(MEASURES))
-        self.measure.setCurrentText(DEFAULT_MEASURE)
+        self.measure.addItems([FIELD_DEFAULT, *MEASURES])
+        self.measure.setToolTip("the field's default: hypervolume for curvature and value, "
+                                "volume (area where degenerate) for gradient")
         self.measure.currentTextChanged.connect(self._measure_changed)
         self.regions = QSpinBox()
         self.regions.setRange(1, 1_000_000)
         self.regions.setValue(DEFAULT_REGIONS)
-        for label, widget in (("image", self.image), ("operator", self.operator),
+        for label, widget in (("image", self.image), ("field", self.field),
+                              ("operator", self.operator),
                               ("smoothing sigma", self.smooth), ("mask", self.mask),
                               ("measure", self.measure), ("regions", self.regions)):
             form.addRow(label, widget)
@@ -206,9 +215,11 @@ class SegmentWidget(QWidget):
 
     def options(self) -> Options:
         sigma = self.smooth.value()
+        measure = self.measure.currentText()
         return Options(operator=self.operator.currentText(),
                        smooth_sigma=None if sigma < 0 else sigma, mask=self.mask.text().strip(),
-                       measure=self.measure.currentText(), n_regions=self.regions.value())
+                       measure=None if measure == FIELD_DEFAULT else measure,
+                       n_regions=self.regions.value(), field=self.field.currentText())
 
     def start(self):
         """Segment the chosen image layer in a thread worker."""
@@ -265,8 +276,9 @@ class SegmentWidget(QWidget):
         self.progress.setValue(len(STAGES))
         kwargs = live.source.layer_kwargs
         name = live.volume.name
-        self._replace_layer("curvature_layer", live.curvature(), f"{name} curvature", "image",
-                            {**kwargs, "colormap": "magma"})
+        # The field, hidden: shown, an opaque layer would hide the image it was made of.
+        self._replace_layer("curvature_layer", live.curvature(), f"{name} {result.field}",
+                            "image", {**kwargs, "colormap": "magma", "visible": False})
         self._replace_layer("labels_layer", live.labels(), f"{name} labels", "labels", kwargs)
         self.labels_layer.mouse_drag_callbacks.append(self._clicked)
         self._cut_enabled(True)
@@ -309,7 +321,7 @@ class SegmentWidget(QWidget):
         """After a run, another measure recuts at once (same count, its own curve)."""
         if self.live is not None and self.live.result is not None \
                 and self.labels_layer is not None:
-            labels = self.live.set_measure(measure)
+            labels = self.live.set_measure(None if measure == FIELD_DEFAULT else measure)
             self._draw_curve()
             self._show_labels(labels)
 

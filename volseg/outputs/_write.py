@@ -48,12 +48,14 @@ def write_result_files(paths: dict, result, values, info: dict, *, frame: Frame 
                                 result.labels, title=title, persistence=curve,
                                 value_range=value_range, n_labels=k, measure=result.measure,
                                 field=getattr(result, "field", "curvature")))
+        field = getattr(result, "field", "curvature")
         if "ngff" in paths:
             jobs.append(pool.submit(write_ngff, paths["ngff"], arrays["labels"],
-                                    result.curvature, frame))     # its means in float64
-        if "paraview" in paths:
+                                    result.curvature, frame, field))  # means in float64
+        if "paraview" in paths:         # the arrays named for what they hold
             jobs.append(pool.submit(write_vti, paths["paraview"],
-                                    {**arrays, "values": values}, frame))
+                                    {"labels": arrays["labels"], field: arrays["curvature"],
+                                     "values": values}, frame))
         if "persistence" in paths:
             jobs.append(pool.submit(write_persistence_plot, paths["persistence"], *curve, k,
                                     measure=result.measure))
