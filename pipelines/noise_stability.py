@@ -10,6 +10,11 @@ clean value range), recomputes curvature and segmentation with that threshold an
 scale, and scores the result against the clean segmentation (Huang-Dom similarity,
 both directional distances, region-number ratio, region count).
 
+With ``--cut defaults`` the protocol is a user's instead: the clean volume and each
+noisy one are segmented with every default re-estimated on that volume (mask,
+smoothing, the field's measure) into `--regions` regions, on each field of
+``--fields``, and scored over every voxel (label 0 outside a mask included).
+
 Noise is "common random numbers": for one dataset and seed the same standard normal
 field is scaled to every level, and every operator sees the same noisy volumes, so
 curves differ by the operator and the level, not by the draw.
@@ -38,6 +43,7 @@ import numpy as np
 
 from volseg.curvature import REGISTRY, cli_choices, normalize_operator
 from volseg.errors import UsageError, VolsegWarning
+from volseg.fields import FIELDS
 from volseg.segment import DEFAULT_REGIONS
 
 from ._output import save_figure, write_csv
@@ -47,9 +53,12 @@ DEFAULT_DATASETS = ("fuel", "neghip", "silicium")
 DEFAULT_OPERATORS = ("laplace_beltrami", "weighted", "unweighted")
 DEFAULT_LEVELS = (0.0, 0.1, 0.25, 0.5, 1.0, 2.0, 5.0, 10.0)
 DEFAULT_SEEDS = 5
-KEY_COLUMNS = ("dataset", "checksum", "operator", "regions", "cut", "mask", "level", "seed")
+KEY_COLUMNS = ("dataset", "checksum", "operator", "field", "regions", "cut", "mask", "level",
+               "seed")
 MASKS = ("none", "auto")
-CUTS = ("threshold", "regions")
+CUTS = ("threshold", "regions", "defaults")
+#: Line colours of the fields in the defaults figure.
+FIELD_COLOURS = {"curvature": "#1f77b4", "gradient": "#d62728", "value": "#2ca02c"}
 DB_NAME = "results.sqlite"
 
 
@@ -80,16 +89,25 @@ def _single_threaded(threads):
         pass
 
 
-def clean_reference(volume, operator, regions, mask="none", threads=1):
+def clean_reference(volume, operator, regions, mask="none", threads=1, field="curvature",
+                    cut="threshold"):
     """Threshold, value scale, labels and mask of the clean segmentation into `regions`.
 
     With ``mask="auto"`` the mask is resolved on the clean volume and held for every
     noisy run (noise would make a value rule select everything): the foreground is
-    a property of the data, not of the draw.
+    a property of the data, not of the draw. With ``cut="defaults"``, the clean
+    volume as it is, segmented on `field` with every default (`_defaults_run`).
     """
     from volseg import segment_volume
 
     _single_threaded(threads)
+    data = np.asarray(volume)
+    if cut == "defaults":
+        clean = _defaults_run(data, operator, field, regions)
+        return {"threshold": None, "value_scale": clean.value_scale,
+                "n_regions": clean.n_regions, "labels": clean.labels, "mask": None,
+                "value_range": float(data.max()) - float(data.min()),
+                "measure": clean.measure, "smooth_sigma": clean.smooth_sigma}
     # The paper's cut: persistence, no pre-smoothing (volseg's defaults for scans differ).
     # Such a cut may be degenerate; the table reports its spread, so no warning here.
     with warnings.catch_warnings():
@@ -97,20 +115,29 @@ def clean_reference(volume, operator, regions, mask="none", threads=1):
         clean = segment_volume(np.asarray(volume, dtype=np.float64), operator=operator,
                                n_regions=regions, mask=mask, measure="persistence",
                                smooth_sigma=0)
-    data = np.asarray(volume)
     return {"threshold": clean.min_persistence, "value_scale": clean.value_scale,
             "n_regions": clean.n_regions, "labels": clean.labels, "mask": clean.mask.mask,
             "value_range": float(data.max()) - float(data.min())}
+
+
+def _defaults_run(data, operator, field, regions):
+    """`data` segmented as a user runs it: every default, re-estimated on it."""
+    from volseg import segment_volume
+
+    with warnings.catch_warnings():          # a degenerate cut shows in the spread
+        warnings.simplefilter("ignore", VolsegWarning)
+        return segment_volume(data, operator=operator, field=field, n_regions=regions)
 
 
 def _failure(err) -> dict:
     return {"error": f"{type(err).__name__}: {' '.join(str(err).split())}"}
 
 
-def clean_reference_safely(volume, operator, regions, mask="none", threads=1):
+def clean_reference_safely(volume, operator, regions, mask="none", threads=1,
+                           field="curvature", cut="threshold"):
     """`clean_reference`, with a failure returned as ``{"error": ...}`` (see below)."""
     try:
-        return clean_reference(volume, operator, regions, mask, threads)
+        return clean_reference(volume, operator, regions, mask, threads, field, cut)
     except Exception as err:  # noqa: BLE001 - reported in the rows of its tasks
         return _failure(err)
 
@@ -140,15 +167,19 @@ def run_task(task, volume, reference, threads=1):
     data = noisy_volume(volume, task["level"], task["seed"], task["dataset"],
                         reference["value_range"])
     # The paper's rule holds the clean threshold; "regions" cuts the noisy hierarchy
-    # into the clean region count instead, so only the boundaries can move.
+    # into the clean region count instead, so only the boundaries can move; "defaults"
+    # re-estimates everything on the noisy volume, as a user's run would.
     cut = ({"n_regions": reference["n_regions"]} if task.get("cut") == "regions"
            else {"min_persistence": reference["threshold"]})
     mask = reference["mask"]
-    with warnings.catch_warnings():          # the paper's cut, its spread in the table
-        warnings.simplefilter("ignore", VolsegWarning)
-        result = segment_volume(data, operator=task["operator"],
-                                value_scale=reference["value_scale"], mask=mask,
-                                measure="persistence", smooth_sigma=0, **cut)
+    if task.get("cut") == "defaults":
+        result = _defaults_run(data, task["operator"], task["field"], task["regions"])
+    else:
+        with warnings.catch_warnings():          # the paper's cut, its spread in the table
+            warnings.simplefilter("ignore", VolsegWarning)
+            result = segment_volume(data, operator=task["operator"],
+                                    value_scale=reference["value_scale"], mask=mask,
+                                    measure="persistence", smooth_sigma=0, **cut)
     clean = reference["labels"]
     scores = compare(clean, result.labels, mask=mask)  # a masked run scores its foreground
     # Plateaus (fuel and neghip are about half exact zeros) have zero curvature, so
@@ -171,6 +202,9 @@ def run_task(task, volume, reference, threads=1):
         "clean_regions": reference["n_regions"],
         "threshold": reference["threshold"],
         "value_scale": reference["value_scale"],
+        "measure": result.measure,
+        "largest_share": float(np.bincount(result.labels[result.labels > 0]).max(initial=0)
+                               / max(int((result.labels > 0).sum()), 1)),
         "seconds": time.perf_counter() - start,
     }
 
@@ -191,12 +225,18 @@ def load_dataset(spec):
     return volume.name, np.asarray(volume), files_sha256(volume.files)
 
 
-def plan(datasets, operators, levels, seeds, regions, cut="threshold", mask="none"):
-    """All tasks, as dictionaries of the key columns, in a stable order."""
+def plan(datasets, operators, levels, seeds, regions, cut="threshold", mask="none",
+         fields=("curvature",)):
+    """All tasks, as dictionaries of the key columns, in a stable order. A field that
+    is not the curvature reads no operator: it runs once, with the first."""
+    from volseg.fields import get_field
+
+    pairs = [(field, operator) for field in fields
+             for operator in (operators if get_field(field).needs_scale else operators[:1])]
     return [
-        {"dataset": name, "checksum": checksum, "operator": operator, "regions": regions,
-         "cut": cut, "mask": mask, "level": float(level), "seed": seed}
-        for name, _, checksum in datasets for operator in operators
+        {"dataset": name, "checksum": checksum, "operator": operator, "field": field,
+         "regions": regions, "cut": cut, "mask": mask, "level": float(level), "seed": seed}
+        for name, _, checksum in datasets for field, operator in pairs
         for level in levels for seed in range(seeds)
     ]
 
@@ -243,7 +283,7 @@ class _Progress:
 
 def run(datasets, out_dir, *, operators=DEFAULT_OPERATORS, levels=DEFAULT_LEVELS,
         seeds=DEFAULT_SEEDS, regions=DEFAULT_REGIONS, cut="threshold", mask="none", scheduler=None,
-        workers=None,
+        workers=None, fields=("curvature",),
         say=lambda message: None) -> dict:
     """Run (or resume) the tasks not yet done; returns counts of what happened.
 
@@ -258,7 +298,12 @@ def run(datasets, out_dir, *, operators=DEFAULT_OPERATORS, levels=DEFAULT_LEVELS
     out_dir = Path(out_dir)
     if mask not in MASKS:
         raise UsageError(f"mask must be one of {MASKS}, got {mask!r}")
-    tasks = plan(datasets, operators, levels, seeds, regions, cut, mask)
+    if cut != "defaults" and tuple(fields) != ("curvature",):
+        raise UsageError("--fields other than curvature need --cut defaults (the paper's "
+                         "protocol is the curvature's)")
+    if cut == "defaults" and mask != "none":
+        raise UsageError("--cut defaults chooses its own mask; leave --mask none")
+    tasks = plan(datasets, operators, levels, seeds, regions, cut, mask, fields)
     out_dir.mkdir(parents=True, exist_ok=True)
     lock = FolderLock(out_dir, "results", busy="another noise-stability run is using it")
     try:
@@ -299,16 +344,19 @@ def _submit_and_record(client, pending, datasets, regions, mask, store, counts, 
                  for name, volume, _ in datasets if name in needed}
     references = {}
     for t in pending:
-        pair = (t["dataset"], t["operator"])
-        if pair not in references:
-            references[pair] = client.submit(clean_reference_safely, scattered[pair[0]],
-                                             pair[1], regions, mask, pure=False)
+        which = (t["dataset"], t["operator"], t["field"])
+        if which not in references:
+            references[which] = client.submit(clean_reference_safely, scattered[which[0]],
+                                              which[1], regions, mask, 1, which[2], t["cut"],
+                                              pure=False)
     futures = {}
     run_token = uuid.uuid4().hex[:8]  # two runs on one scheduler never share keys
     for t in pending:
-        name = f"noise-{t['dataset']}-{t['operator']}-{t['level']}-{t['seed']}-{run_token}"
+        name = (f"noise-{t['dataset']}-{t['operator']}-{t['field']}-{t['level']}-"
+                f"{t['seed']}-{run_token}")
         future = client.submit(run_task_safely, t, scattered[t["dataset"]],
-                               references[(t["dataset"], t["operator"])], key=name)
+                               references[(t["dataset"], t["operator"], t["field"])],
+                               key=name)
         futures[future] = t
     errors = {}
     for future in as_completed(futures):
@@ -337,18 +385,19 @@ _STYLES = ["-", "--", ":", "-."]
 
 
 def summarize(rows):
-    """Mean, standard deviation, min and max over seeds per (dataset, operator, cut,
-    mask, level)."""
+    """Mean, standard deviation, min and max over seeds per (dataset, operator, field,
+    cut, mask, level)."""
     groups = {}
     for row in rows:
-        key = (row["dataset"], row["operator"], row["cut"], row["mask"], row["level"])
+        key = (row["dataset"], row["operator"], row.get("field", "curvature"), row["cut"],
+               row["mask"], row["level"])
         groups.setdefault(key, []).append(row)
     out = []
-    for (dataset, operator, cut, mask, level), members in sorted(groups.items()):
-        entry = {"dataset": dataset, "operator": operator, "cut": cut, "mask": mask,
-                 "level": level, "seeds": len(members)}
+    for (dataset, operator, field, cut, mask, level), members in sorted(groups.items()):
+        entry = {"dataset": dataset, "operator": operator, "field": field, "cut": cut,
+                 "mask": mask, "level": level, "seeds": len(members)}
         for metric in ("similarity", "similarity_foreground", "region_ratio", "n_regions",
-                       "seconds"):
+                       "largest_share", "seconds"):
             values = np.array([m.get(metric, np.nan) for m in members], dtype=float)
             entry.update({f"{metric}_mean": values.mean(), f"{metric}_std": values.std(),
                           f"{metric}_min": values.min(), f"{metric}_max": values.max()})
@@ -384,6 +433,13 @@ def report(out_dir) -> list[Path]:
                              panels=[("similarity_foreground",
                                       "Huang-Dom similarity, foreground voxels only"),
                                      ("region_ratio", "region-number ratio min/max")]))
+    defaults = [s for s in summary if s["cut"] == "defaults"]
+    if defaults:
+        paths.append(_figure(defaults, out_dir / "fig5_defaults.png",
+                             panels=[("similarity", "Huang-Dom similarity, all voxels"),
+                                     ("largest_share", "largest region's share")],
+                             title="every default re-estimated on each volume",
+                             by_field=True))
     recut = [s for s in summary if s["cut"] == "regions"]
     if recut:
         paths.append(_figure(recut, out_dir / "fig5_regions.png",
@@ -398,10 +454,12 @@ _PANELS = [("similarity", "Huang-Dom similarity to the clean result"),
            ("region_ratio", "region-number ratio min/max")]
 
 
-def _figure(summary, path, panels=_PANELS, title="threshold of the clean result held fixed"):
-    """Fig. 5's layout: similarity and region ratio vs noise, a line per operator and
-    dataset (colour = operator, style = dataset), mean over seeds with a min-max band.
-    Levels sit at even spacing (the paper's axis also jumps in rate)."""
+def _figure(summary, path, panels=_PANELS, title="threshold of the clean result held fixed",
+            by_field=False):
+    """Fig. 5's layout: similarity and region ratio vs noise, a line per operator (or
+    field) and dataset (colour = operator or field, style = dataset), mean over seeds
+    with a min-max band. Levels sit at even spacing (the paper's axis also jumps in
+    rate)."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -414,15 +472,18 @@ def _figure(summary, path, panels=_PANELS, title="threshold of the clean result 
     axes = fig.subplots(1, 2)
     for ax, (metric, panel_title) in zip(axes, panels, strict=True):
         for d, dataset in enumerate(datasets):
-            for operator in sorted({s["operator"] for s in summary}):
-                line = [s for s in summary if s["dataset"] == dataset and s["operator"] == operator]
+            for series in sorted({(s["operator"], s["field"]) for s in summary}):
+                line = [s for s in summary if s["dataset"] == dataset
+                        and (s["operator"], s["field"]) == series]
                 if not line:
                     continue
                 x = [position[s["level"]] for s in line]
-                color = REGISTRY[operator].colour
+                operator, field = series
+                color = (FIELD_COLOURS.get(field, "k") if by_field
+                         else REGISTRY[operator].colour)
+                name = field if by_field else REGISTRY[operator].label
                 ax.plot(x, [s[f"{metric}_mean"] for s in line], _STYLES[d % len(_STYLES)],
-                        color=color, marker="o", markersize=3,
-                        label=f"{REGISTRY[operator].label}, {dataset}")
+                        color=color, marker="o", markersize=3, label=f"{name}, {dataset}")
                 ax.fill_between(x, [s[f"{metric}_min"] for s in line],
                                 [s[f"{metric}_max"] for s in line], color=color, alpha=0.12,
                                 linewidth=0)
@@ -458,7 +519,10 @@ def _parser():
                    help="regions of the clean segmentation that fix the threshold")
     p.add_argument("--cut", choices=CUTS, default="threshold",
                    help="threshold: hold the clean threshold (the paper); regions: cut "
-                   "each noisy result into the clean region count")
+                   "each noisy result into the clean region count; defaults: segment the "
+                   "clean and each noisy volume with every default, as a user runs them")
+    p.add_argument("--fields", nargs="+", default=["curvature"], choices=list(FIELDS),
+                   help="with --cut defaults: the fields to segment (default curvature)")
     p.add_argument("--mask", choices=MASKS, default="none",
                    help="auto: segment and score only the clean volume's foreground (the "
                    "minimum plateau masked out when it covers over half the volume)")
@@ -494,7 +558,7 @@ def main(argv=None) -> int:
             counts = run(datasets, args.out, operators=operators, levels=args.levels,
                          seeds=args.seeds, regions=args.regions, cut=args.cut,
                          mask=args.mask, scheduler=args.scheduler,
-                         workers=args.workers, say=say)
+                         workers=args.workers, fields=args.fields, say=say)
             say(f"ran {counts['ran']} tasks ({counts['failed']} failed) in "
                 f"{counts['seconds']:.1f} s; {counts['already_done']} were already done")
         if args.report or args.report_only:

@@ -33,9 +33,10 @@ def tiny(tmp_path_factory):
     return paths
 
 
-def _task(level, seed, operator="weighted", dataset="alpha"):
-    return {"dataset": dataset, "checksum": "x", "operator": operator, "regions": 8,
-            "cut": "threshold", "mask": "none", "level": level, "seed": seed}
+def _task(level, seed, operator="weighted", dataset="alpha", field="curvature",
+          cut="threshold"):
+    return {"dataset": dataset, "checksum": "x", "operator": operator, "field": field,
+            "regions": 8, "cut": cut, "mask": "none", "level": level, "seed": seed}
 
 
 def _done_rows(db):
@@ -69,6 +70,28 @@ def test_zero_noise_gives_similarity_one_and_ratio_one():
         assert row["d_clean_to_noisy"] == 0 and row["d_noisy_to_clean"] == 0
         noisy = ns.run_task(_task(5.0, 0, operator), clean, reference)
         assert noisy["similarity"] < 1.0
+
+
+def test_defaults_protocol_reestimates_everything_on_each_volume():
+    """``--cut defaults``: each field as a user runs it (its own measure, mask and
+    smoothing, re-estimated on the noisy volume); a field that reads no operator runs
+    once; other fields than the curvature need this protocol."""
+    clean = _volume(3, n=28)
+    for field in ("curvature", "gradient", "value"):
+        reference = ns.clean_reference(clean, "weighted", 8, field=field, cut="defaults")
+        row = ns.run_task(_task(0.0, 0, field=field, cut="defaults"), clean, reference)
+        assert row["similarity"] == 1.0 and row["n_regions"] == reference["n_regions"]
+        noisy = ns.run_task(_task(10.0, 0, field=field, cut="defaults"), clean, reference)
+        assert noisy["similarity"] < 1.0 and noisy["measure"] == reference["measure"]
+    data = [("alpha", clean, "x")]
+    tasks = ns.plan(data, ["weighted", "unweighted"], [0.0], 1, 8, "defaults", "none",
+                    ("curvature", "gradient"))
+    assert [(t["field"], t["operator"]) for t in tasks] == [
+        ("curvature", "weighted"), ("curvature", "unweighted"), ("gradient", "weighted")]
+    from volseg.errors import UsageError
+
+    with pytest.raises(UsageError, match="need --cut defaults"):
+        ns.run(data, "unused", fields=("gradient",))
 
 
 @pytest.mark.slow
