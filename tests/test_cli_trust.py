@@ -573,3 +573,31 @@ def test_force_leaves_no_file_of_the_old_run_beside_the_new_set(tmp_path, capsys
     new = {p.name for p in out.iterdir() if not p.name.startswith(".")}
     assert new == {"s_labels.nii.gz", "s_gradient.nii.gz", "s_segmentation.ome.zarr",
                    "s_summary.json", "s_preview.png"}, new
+
+
+def test_a_bool_volume_is_refused_and_leaves_no_folder(tmp_path, capsys):
+    """A boolean .npy is a mask or a label map, not an image (issue 57, #13): exit 2,
+    a message naming the file, and no output folder (nor work folder) left behind."""
+    np.save(tmp_path / "b.npy", np.random.default_rng(0).random((9, 9, 9)) > 0.5)
+    for extra in ([], ["--chunks", "4"]):
+        out = tmp_path / f"out{len(extra)}"
+        assert main(["segment", str(tmp_path / "b.npy"), "-o", str(out), *extra]) == 2
+        assert "holds booleans" in capsys.readouterr().err
+        assert not out.exists()
+    kept = tmp_path / "kept"
+    kept.mkdir()
+    assert main(["segment", str(tmp_path / "b.npy"), "-o", str(kept)]) == 2
+    assert kept.is_dir() and not any(kept.iterdir())
+
+
+def test_chunks_on_an_axis_shorter_than_the_halo_equal_in_memory(tmp_path):
+    """A 3-voxel axis in 2-voxel chunks under a smoothing halo of 4: that axis is one
+    block (Dask cut no halo deeper than the array), the labels equal in memory."""
+    rng = np.random.default_rng(0)
+    np.save(tmp_path / "thin.npy", rng.integers(0, 255, (20, 18, 3)).astype(np.uint8))
+    for name, extra in (("mem", []), ("blocks", ["--chunks", "2"])):
+        assert main(["segment", str(tmp_path / "thin.npy"), "-o", str(tmp_path / name),
+                     "-q", "--regions", "6", "--no-vti", *extra]) == 0
+    a, b = (np.asarray(nibabel.load(tmp_path / n / "thin_labels.nii.gz").dataobj)
+            for n in ("mem", "blocks"))
+    np.testing.assert_array_equal(a, b)

@@ -32,9 +32,16 @@ def gaussian(data, sigma: float):
         return _filter(data, sigma)
     radius = int(TRUNCATE * float(sigma) + 0.5)
     chunks = data.chunks
+    # An axis shorter than the halo is one block (Dask cannot cut a halo deeper than
+    # the array); a block that spans its axis needs no halo there: the filter's own
+    # 'nearest' edge is what the padding would give.
+    short = {axis: -1 for axis, n in enumerate(data.shape) if n <= radius}
+    if short:
+        data = data.rechunk(short)
+    depth = {axis: 0 if len(c) == 1 else radius for axis, c in enumerate(data.chunks)}
     # The halos are cut from the input as it is (1 byte per voxel for uint8, not 8):
     # each block becomes float64 inside the filter, the same values.
-    out = data.map_overlap(_filter, depth=radius, boundary="nearest", dtype=np.float64,
+    out = data.map_overlap(_filter, depth=depth, boundary="nearest", dtype=np.float64,
                            sigma=sigma)
     return out if out.chunks == chunks else out.rechunk(chunks)
 

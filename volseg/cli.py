@@ -290,11 +290,28 @@ def _cut_options(args) -> dict:
 
 
 def _cmd_segment(args):
+    say = _progress(args.quiet)
+    out_dir = Path(args.out_dir)
+    with _removed_if_left_empty(out_dir):
+        return _segment(args, say, out_dir)
+
+
+@contextmanager
+def _removed_if_left_empty(out_dir: Path):
+    """Remove `out_dir` when this command created it and fails leaving it empty."""
+    existed = out_dir.exists()
+    try:
+        yield
+    except BaseException:
+        if not existed and out_dir.is_dir() and not any(out_dir.iterdir()):
+            out_dir.rmdir()
+        raise
+
+
+def _segment(args, say, out_dir: Path):
     from .blockwise.engine import Engine
     from .files import load_for_budget, segment_files
 
-    say = _progress(args.quiet)
-    out_dir = Path(args.out_dir)
     mask = args.mask if args.mask_threshold is None else f"value>{args.mask_threshold!r}"
     field = args.field if FIELD_REGISTRY.get(args.field) else None    # else a file
     request = _checked_request(**_cut_options(args), operator=args.operator, mask=mask,

@@ -17,6 +17,7 @@ field or the argument.
 from __future__ import annotations
 
 import os
+import shutil
 import time
 import warnings
 from contextlib import ExitStack
@@ -294,8 +295,13 @@ def segment_to_files(volume, outputs, *, operator="weighted", n_regions=None,
                 else request.field.label)
         say(f"{name}: {what} and Morse complex of a "
             f"{'x'.join(map(str, data.shape))} volume{blocks}")
-        result, value_range = _stages_saying_warnings(data, request, storage, name, say,
-                                                      str(volume.path or name))
+        try:
+            result, value_range = _stages_saying_warnings(data, request, storage, name, say,
+                                                          str(volume.path or name))
+        except ValueError:     # the input refused: no work worth resuming
+            if lazy:
+                shutil.rmtree(storage.work_folder, ignore_errors=True)
+            raise
         info = _write_result(paths, volume, result, data, value_range, outputs,
                              checksum=checksum, noise=noise, seed=seed,
                              requested_regions=n_regions, started=started, say=say,

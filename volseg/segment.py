@@ -445,6 +445,9 @@ def run_stages(data, request: SegmentRequest, storage: Storage | None = None, *,
     (Segmentation, (min, max) of the input's values)
     """
     storage = storage or InMemory()
+    if data.dtype == bool:
+        raise ValueError(f"{source} holds booleans (a mask or a label map?), not an image "
+                         "to segment; cast it (astype(numpy.uint8)) if that is what you mean")
     raw = data                                       # values as read: the mask's rules
     value_range = input_range(data)                  # one pass, before anything is kept
     if not all(np.isfinite(v) for v in value_range):

@@ -382,3 +382,15 @@ def test_region_count_cut_keeps_the_events_a_full_sort_would():
             expected = np.ones(n, dtype=bool)
             expected[np.lexsort((young, -p))[:keep]] = False
             assert np.array_equal(_all_but_most_persistent(p, young, keep), expected)
+
+
+def test_integers_beyond_2_53_are_refused_not_rounded_into_one_plateau():
+    """int64 maxima 1 apart above 2^53 would be one float64 value (issue 57, #6)."""
+    import pytest
+
+    big = np.int64(2**60)
+    field = np.array([0, big, big - 2, big - 1, 0], dtype=np.int64)
+    with pytest.raises(ValueError, match="beyond 2\\^53"):
+        descending_complex(field)
+    small = np.array([0, 2**53, 2**53 - 2, 2**53 - 1, 0], dtype=np.int64)
+    assert len(descending_complex(small).maxima) == 2

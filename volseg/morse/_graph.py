@@ -117,6 +117,22 @@ class _Neighbourhood:
         return np.ravel_multi_index(tuple(c - 1 for c in coords), shape)
 
 
+#: The largest integer magnitude float64 holds exactly (every integer up to it).
+EXACT_INTEGER = 2**53
+
+
+def _exactly_float(field) -> None:
+    """Refuse 64-bit integers that float64 would round: two maxima 1 apart above 2^53
+    would become one plateau and one maximum, silently."""
+    if field.dtype.kind in "iu" and field.dtype.itemsize >= 8 and field.size:
+        low, high = int(field.min()), int(field.max())
+        if max(abs(low), abs(high)) > EXACT_INTEGER:
+            raise ValueError(f"`field` holds {field.dtype} values up to {max(abs(low), high)}, "
+                             f"beyond 2^53, where float64 (the Morse stage's order) "
+                             "rounds distinct integers together; subtract an offset or "
+                             "give their ranks (e.g. scipy.stats.rankdata)")
+
+
 def _validate_field(field, mask, adjacency) -> tuple:
     """(float64 values, bool mask or None), checked."""
     field = np.asarray(field)
@@ -126,6 +142,7 @@ def _validate_field(field, mask, adjacency) -> tuple:
         raise ValueError("`field` is empty")
     if field.ndim == 0:
         raise ValueError("`field` is a single number; give an array (one value per vertex)")
+    _exactly_float(field)
     values = np.ascontiguousarray(field, dtype=np.float64)  # flat indices are C order
     if mask is not None:
         mask = np.asarray(mask)
