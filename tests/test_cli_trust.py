@@ -601,3 +601,21 @@ def test_chunks_on_an_axis_shorter_than_the_halo_equal_in_memory(tmp_path):
     a, b = (np.asarray(nibabel.load(tmp_path / n / "thin_labels.nii.gz").dataobj)
             for n in ("mem", "blocks"))
     np.testing.assert_array_equal(a, b)
+
+
+def test_an_oblique_inputs_ome_zarr_placement_is_said(tmp_path, capsys):
+    """NGFF 0.5 holds no rotation or flip (issue 58): the summary and stderr say the
+    OME-Zarr image is placed axis-aligned; an axis-aligned input's is exact."""
+    volume = np.random.default_rng(0).integers(0, 255, (16, 14, 12)).astype(np.uint8)
+    rotated = np.array([[0, -1.5, 0, 10], [1, 0, 0, -5], [0, 0, 2, 3], [0, 0, 0, 1.0]])
+    for name, affine in (("rot", rotated), ("flat", np.diag([1.0, 1.5, 2.0, 1.0]))):
+        nibabel.save(nibabel.Nifti1Image(volume, affine), tmp_path / f"{name}.nii.gz")
+        assert main(["segment", str(tmp_path / f"{name}.nii.gz"), "-o", str(tmp_path / name),
+                     "--regions", "5", "--no-vti"]) == 0
+        err = capsys.readouterr().err
+        placement = json.loads((tmp_path / name / f"{name}_summary.json").read_text())[
+            "ome_zarr_placement"]
+        if name == "rot":
+            assert placement.startswith("axis-aligned") and "placed axis-aligned" in err
+        else:
+            assert placement == "exact" and "axis-aligned" not in err

@@ -377,6 +377,9 @@ def _write_result(paths, volume, result, data, value_range, outputs, *, checksum
     say(f"{name}: {result.n_regions} regions{result.mask.phrase()} from "
         f"{result.report.n_maxima} maxima; writing")
     _say_left_out(say, name, result.mask, data)
+    if "ngff" in paths and not frame.axis_aligned:
+        say(f"{name}: the OME-Zarr image is placed axis-aligned (NGFF 0.5 holds no rotation "
+            "or flip); the NIfTI outputs and the .vti carry the input's full affine")
     if result.cut.get("measure_rule", "").startswith(f"{result.measure}:"):
         say(f"{name}: cut by {result.cut['measure_rule']}")
     info = summary(result, name=name, source=volume.path, checksum=checksum,

@@ -91,6 +91,13 @@ class Frame:
         return Frame(self.affine, self.sform_code, self.qform_code, self.qform, unit)
 
     @property
+    def axis_aligned(self) -> bool:
+        """Whether voxel axis i runs along world axis i, forwards: no rotation, no flip
+        (what an OME-Zarr's scale and translation can hold)."""
+        linear = self.affine[:3, :3]
+        return bool(np.all(linear[~np.eye(3, dtype=bool)] == 0) and np.all(np.diag(linear) > 0))
+
+    @property
     def spacing(self) -> tuple:
         """Voxel sizes: the lengths of the affine's three voxel axes."""
         return tuple(float(s) for s in np.linalg.norm(self.affine[:3, :3], axis=0))

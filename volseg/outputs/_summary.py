@@ -166,6 +166,18 @@ def input_summary(name, source=None, checksum=None, files=()) -> dict:
     }
 
 
+#: What the summary says of an oblique or flipped input's OME-Zarr image.
+NGFF_NOT_PLACED = ("axis-aligned: the input's frame rotates or flips its axes, which "
+                   "NGFF 0.5 (scale and translation only) cannot hold; the OME-Zarr "
+                   "image's voxel (i, j, k) sits at origin + spacing x (i, j, k), not where "
+                   "the scan is. The NIfTI outputs and the .vti carry the full affine")
+
+
+def ngff_placement(frame) -> str:
+    """``"exact"`` when the OME-Zarr image can sit where the input is, else why not."""
+    return "exact" if frame is None or frame.axis_aligned else NGFF_NOT_PLACED
+
+
 def summary(result, *, name, source=None, checksum=None, files=(), frame: Frame | None = None,
             noise=None, seed=None, requested_regions=None) -> dict:
     """The summary dictionary of a `Segmentation` of a volume (strict-JSON ready)."""
@@ -175,6 +187,7 @@ def summary(result, *, name, source=None, checksum=None, files=(), frame: Frame 
         "shape": list(result.labels.shape),
         "spacing": list(result.spacing),
         "affine": (frame.affine if frame is not None else np.diag([*result.spacing, 1.0])).tolist(),
+        "ome_zarr_placement": ngff_placement(frame),
         "operator": common.pop("operator"),
         "value_scale": result.value_scale,
         "noise_percent": noise or 0.0,
