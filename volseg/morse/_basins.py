@@ -11,8 +11,9 @@ the sum of f(v) - s over them. A vertex joins at the first event whose saddle is
 below it, its *rank* (the count of events with a higher saddle). `records` sums the
 vertices per (cell, rank), block by block, in fixed point on a grid (`STEPS` per range
 of the field, `volseg.morse._measures`), so the blocks' sums add up to the in-memory
-ones bit for bit; `saliency` then sweeps the events once, adding each rank's records to
-its region and reading both sides before joining them.
+ones bit for bit (in memory, one record per vertex); `saliency` then sweeps the events
+once, adding each rank's records (a counting sort) to its region and reading both sides
+before joining them.
 
 A cut by saliency keeps the k - 1 events of largest saliency and merges the rest
 across their saddle edges (source, target): the regions are connected, and a larger
@@ -107,38 +108,41 @@ def block_records(cells, field, negated_saddles, low, unit):
 
 
 def joined(parts, n_events: int, low: float, unit: float, scale: float) -> Basins:
-    """`Basins` from blocks' `block_records` (keys, counts, sums): summed per key, in
-    integers (exact in any order)."""
+    """`Basins` from blocks' `block_records` (keys, counts, sums), side by side: a key
+    may come from several blocks; the sweep adds its records in any order, in
+    integers (exact)."""
     keys = np.concatenate([p[0] for p in parts]) if parts else np.zeros(0, np.int64)
     counts = np.concatenate([p[1] for p in parts]) if parts else np.zeros(0, np.int64)
     sums = np.concatenate([p[2] for p in parts]) if parts else np.zeros(0, np.int64)
-    distinct, at = np.unique(keys, return_inverse=True)
-    count = np.zeros(len(distinct), np.int64)
-    total = np.zeros(len(distinct), np.int64)
-    np.add.at(count, at, counts)
-    np.add.at(total, at, sums)
     n_ranks = np.int64(n_events + 1)
-    return Basins(distinct // n_ranks, distinct % n_ranks, count, total, low, unit, scale)
+    return Basins(keys // n_ranks, keys % n_ranks, counts, sums, low, unit, scale)
 
 
 def records(cells, field, saddle_value, weight, unit_of, scale_of) -> Basins:
-    """`Basins` of a field in memory: fixed point on a grid (`weight` None or a
+    """`Basins` of a field in memory: one record per vertex (no table: the sweep's
+    counting sort by rank is the grouping), fixed point on a grid (`weight` None or a
     number; the step ``unit_of(low, high)``, an area step ``scale_of(weight, 1)``),
     float sums weighted per vertex on a mesh (`weight` one per vertex)."""
     cells, field = np.ravel(cells), np.ravel(field)
+    inside = cells >= 0
+    cell = cells[inside].astype(np.int64)
+    values = field[inside]
+    rank = ranks_of(values, saddle_value)
     if weight is not None and np.ndim(weight) > 0:
-        inside = cells >= 0
-        n_ranks = np.int64(len(saddle_value) + 1)
-        key = cells[inside].astype(np.int64) * n_ranks + ranks_of(field[inside], saddle_value)
-        distinct, at = np.unique(key, return_inverse=True)
         w = np.asarray(weight, np.float64)[inside]
-        count = np.bincount(at, weights=w, minlength=len(distinct))
-        sums = np.bincount(at, weights=w * field[inside], minlength=len(distinct))
-        return Basins(distinct // n_ranks, distinct % n_ranks, count, sums, 0.0, 1.0, 1.0)
+        return Basins(cell, rank, w, w * values, 0.0, 1.0, 1.0)
     low, high = masked_range(cells, field)
     unit = unit_of(low, high)
-    part = block_records(cells, field, -np.asarray(saddle_value, np.float64), low, unit)
-    return joined([part], len(saddle_value), low, unit, scale_of(weight, 1.0))
+    return Basins(cell, rank, np.ones(len(cell), np.int64), _steps(values, low, unit), low,
+                  unit, scale_of(weight, 1.0))
+
+
+@numba.njit(cache=True, nogil=True)
+def _steps(values, low, unit):
+    out = np.empty(len(values), dtype=np.int64)
+    for i in range(len(values)):
+        out[i] = np.int64(np.floor((values[i] - low) / unit))
+    return out
 
 
 def saliency(basins: Basins, source, target, saddle_value, n_max: int,
@@ -151,12 +155,28 @@ def saliency(basins: Basins, source, target, saddle_value, n_max: int,
         level = np.floor((saddle_value - basins.low) / basins.unit).astype(np.int64)
     else:
         level = saddle_value
-    order = np.argsort(basins.rank, kind="stable")
     out = np.empty(len(source), dtype=basins.sums.dtype)
-    _sweep(basins.cell[order], basins.rank[order], basins.count[order], basins.sums[order],
+    _sweep(basins.cell, basins.rank, basins.count, basins.sums,
            np.asarray(source, np.int64), np.asarray(target, np.int64), level, n_max,
            volume, out)
     return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _by_rank(rank, n_ranks):
+    """(start, order): the records in rank order by a counting sort, rank r's at
+    order[start[r]:start[r + 1]]."""
+    start = np.zeros(n_ranks + 1, dtype=np.int64)
+    for i in range(len(rank)):
+        start[rank[i] + 1] += 1
+    for r in range(n_ranks):
+        start[r + 1] += start[r]
+    at = start[:-1].copy()
+    order = np.empty(len(rank), dtype=np.int64)
+    for i in range(len(rank)):
+        order[at[rank[i]]] = i
+        at[rank[i]] += 1
+    return start, order
 
 
 @numba.njit(cache=True, nogil=True)
@@ -164,13 +184,13 @@ def _sweep(cell, rank, count, sums, source, target, level, n_max, volume, out):
     parent = np.arange(n_max)
     area = np.zeros(n_max, dtype=count.dtype)
     total = np.zeros(n_max, dtype=sums.dtype)
-    t = 0
+    start, order = _by_rank(rank, len(source) + 1)
     for e in range(len(source)):
-        while t < len(rank) and rank[t] <= e:
-            r = find_root(parent, cell[t])
-            area[r] += count[t]
-            total[r] += sums[t]
-            t += 1
+        for t in range(start[e], start[e + 1]):
+            i = order[t]
+            r = find_root(parent, cell[i])
+            area[r] += count[i]
+            total[r] += sums[i]
         a, b = find_root(parent, source[e]), find_root(parent, target[e])
         if volume:
             left, right = total[a] - level[e] * area[a], total[b] - level[e] * area[b]
