@@ -619,3 +619,18 @@ def test_an_oblique_inputs_ome_zarr_placement_is_said(tmp_path, capsys):
             assert placement.startswith("axis-aligned") and "placed axis-aligned" in err
         else:
             assert placement == "exact" and "axis-aligned" not in err
+
+
+def test_a_smoothing_wider_than_the_volume_is_refused_at_once(tmp_path, capsys):
+    """--smooth 1e6 on a 41^3 volume ran for hours (issue 57, #7); smooth_sigma=1e9 was
+    a bare MemoryError. Both are refused before any work, naming the bound."""
+    from volseg import segment_volume
+
+    volume = np.random.default_rng(0).integers(0, 255, (41, 41, 41)).astype(np.uint8)
+    np.save(tmp_path / "v.npy", volume)
+    assert main(["segment", str(tmp_path / "v.npy"), "-o", str(tmp_path / "o"),
+                 "--smooth", "1e6"]) == 2
+    assert "use at most 41" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
+    with pytest.raises(ValueError, match="wider than"):
+        segment_volume(volume, smooth_sigma=1e9)

@@ -453,6 +453,12 @@ def run_stages(data, request: SegmentRequest, storage: Storage | None = None, *,
     if not all(np.isfinite(v) for v in value_range):
         raise ValueError(f"{source} holds NaN or infinite values (its range is "
                          f"{value_range[0]} .. {value_range[1]}); replace them first")
+    widest = max(data.shape)
+    if request.smooth_sigma is not None and request.smooth_sigma > widest:
+        raise ValueError(f"the smoothing sigma {request.smooth_sigma:g} (--smooth, "
+                         f"`smooth_sigma`) is wider than {source} "
+                         f"({widest} voxels along its longest axis): it would blur it to "
+                         f"one value; use at most {widest}")
     data, shifted_range, lattice = _as_computed(data, value_range)
     # A mask rule reads the histogram of levels, unless the values are those levels
     # already (integers of step 1: the same histogram, as before the lattice).
