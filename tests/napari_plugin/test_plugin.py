@@ -316,3 +316,26 @@ def test_reader_reads_a_store_with_skipped_chunks_and_says_so(tmp_path):
         (layer_data, options, kind), = read(str(image))
     assert kind == "image"
     np.testing.assert_array_equal(np.asarray(layer_data), data)
+
+
+def test_reader_refuses_a_fifo_and_names_a_missing_file(tmp_path):
+    """A FIFO named like a summary is not opened (it would block the viewer); a summary
+    whose files are gone is a one-line error naming the file; a gradient run's set is
+    read by its field's name (issue 57, #10)."""
+    import os
+
+    from volseg.cli import main
+    from volseg.napari_plugin._reader import napari_get_reader, read
+
+    fifo = tmp_path / "x_summary.json"
+    os.mkfifo(fifo)
+    assert napari_get_reader(str(fifo)) is None
+    np.save(tmp_path / "b.npy", demo_volume(24))
+    assert main(["segment", str(tmp_path / "b.npy"), "-o", str(tmp_path / "out"), "-q",
+                 "--regions", "5", "--field", "gradient", "--no-vti"]) == 0
+    summary = tmp_path / "out" / "b_summary.json"
+    field, labels = read(str(summary))
+    assert field[1]["name"] == "b gradient" and labels[2] == "labels"
+    (tmp_path / "out" / "b_labels.nii.gz").unlink()
+    with pytest.raises(ValueError, match="b_labels.nii.gz is missing"):
+        read(str(summary))

@@ -91,25 +91,48 @@ def _input_layer(volume) -> tuple:
              **frame_kwargs(volume.frame)}, "image")
 
 
-def _is_volseg_summary(path: Path) -> bool:
+#: A summary larger than this is not one of volseg's (they are a few kB to a few MB).
+SUMMARY_BYTES = 64 * 2**20
+
+
+def _summary_of(path: Path) -> dict | None:
+    """The summary at `path`, or None when it is not one of volseg's: only a regular
+    file of sane size is opened (a FIFO or a device would block the viewer)."""
     try:
+        if not path.is_file() or path.stat().st_size > SUMMARY_BYTES:
+            return None
         with open(path, encoding="utf-8") as file:
             info = json.load(file)
     except (OSError, ValueError):
-        return False
-    return isinstance(info, dict) and "volseg_version" in info and "n_regions" in info
+        return None
+    if isinstance(info, dict) and "volseg_version" in info and "n_regions" in info:
+        return info
+    return None
+
+
+def _is_volseg_summary(path: Path) -> bool:
+    return _summary_of(path) is not None
 
 
 def _output_set(summary: Path) -> list[tuple]:
     """The curvature and labels beside `summary`: the Zarr stores of a blockwise run,
     else the NIfTI files."""
     stem = summary.name[: -len(_SUMMARY)]
+    info = _summary_of(summary)
+    if info is None:
+        raise ValueError(f"{summary}: not a volseg summary (a regular JSON file with "
+                         "volseg_version and n_regions)")
+    field = info.get("field", "curvature")
     layers = []
     for kind, layer_type in (("curvature", "image"), ("labels", "labels")):
-        zarr = summary.parent / (stem + BLOCKWISE_SUFFIXES[kind])
-        nifti = summary.parent / (stem + OUTPUT_SUFFIXES[kind])
+        zarr = summary.parent / (stem + BLOCKWISE_SUFFIXES[kind].replace("curvature", field))
+        nifti = summary.parent / (stem + OUTPUT_SUFFIXES[kind].replace("curvature", field))
+        if not (zarr.exists() or nifti.exists()):
+            raise ValueError(f"{summary}: its {'labels' if kind == 'labels' else field} file "
+                             f"{nifti.name} is missing beside it (moved or deleted?)")
         volume = _load(zarr if zarr.exists() else nifti)
-        layers.append(_result_layer(to_layer(volume.data), f"{stem} {kind}", layer_type,
+        name = f"{stem} {'labels' if kind == 'labels' else field}"
+        layers.append(_result_layer(to_layer(volume.data), name, layer_type,
                                     frame_kwargs(volume.frame)))
     return layers
 
