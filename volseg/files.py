@@ -241,14 +241,47 @@ def _check_labels_into_input(volumes, name, force) -> None:
     if not name or not all(c.isalnum() or c in "-_." for c in name) or name.startswith("."):
         raise UsageError(f"--labels-into-input: {name!r} is not a labels image name (letters, "
                          "digits, '-', '_', '.')")
+    if name.lower() in ZARR_RESERVED:
+        raise UsageError(f"--labels-into-input: {name!r} is a name Zarr keeps for its own "
+                         "metadata; choose another")
     for volume in volumes:
         if volume.path is None or not is_ome_image(volume.path):
             raise UsageError(f"--labels-into-input: {volume.path or volume.name} is not an "
                              "OME-Zarr image (labels are added only to one)")
+        _check_labels_group(Path(volume.path))
         recover_labels(volume.path, name)      # what a killed run left, undone first
-        if (Path(volume.path) / "labels" / name).exists() and not force:
-            raise UsageError(f"--labels-into-input: {Path(volume.path) / 'labels' / name} "
-                             "exists; give --force to replace it")
+        target = Path(volume.path) / "labels" / name
+        if target.exists() and not target.is_dir():
+            raise UsageError(f"--labels-into-input: {target} is a file, not a labels image; "
+                             "move it away first (--force replaces only a labels image)")
+        if target.exists() and not force:
+            raise UsageError(f"--labels-into-input: {target} exists; give --force to replace "
+                             "it")
+
+
+#: Names a Zarr store keeps for its metadata: never a labels image's name.
+ZARR_RESERVED = ("zarr.json", ".zattrs", ".zgroup", ".zarray", ".zmetadata")
+
+
+def _check_labels_group(image: Path) -> None:
+    """Refuse, before anything is computed, an image whose labels cannot be added: not
+    writable, ``labels`` a file, or ``labels``'s metadata not JSON."""
+    import json
+
+    labels = image / "labels"
+    where = labels if labels.exists() else image
+    if labels.exists() and not labels.is_dir():
+        raise UsageError(f"--labels-into-input: {labels} is a file, not the image's labels "
+                         "group")
+    if not os.access(where, os.W_OK | os.X_OK):
+        raise UsageError(f"--labels-into-input: {where} is not writable")
+    for meta in ("zarr.json", ".zattrs"):
+        if (labels / meta).is_file():
+            try:
+                json.loads((labels / meta).read_text(encoding="utf-8"))
+            except (OSError, ValueError) as err:
+                raise UsageError(f"--labels-into-input: {labels / meta} is not readable "
+                                 f"JSON ({type(err).__name__}); repair or remove it") from None
 
 
 def segment_to_files(volume, outputs, *, operator="weighted", n_regions=None,

@@ -243,3 +243,47 @@ def test_labels_added_to_an_input_validate_in_its_ngff_version(tmp_path, version
     assert type(model).__module__.startswith(f"ome_zarr_models.v0{version[-1]}")
     labels = open_ome_zarr(zarr.open_group(str(image / "labels" / "volseg"), mode="r"))
     assert type(labels).__name__ == "ImageLabel"
+
+
+def test_labels_into_input_hazards_are_refused_before_computing(tmp_path, capsys):
+    """Issue 57, #3, #9, #11: a Zarr metadata name, a labels group that is a file,
+    garbage labels metadata, a read-only image and a user's file at labels/<name> are
+    refused before anything is computed or written, naming the path, and the image is
+    left as it was."""
+    import os
+    import shutil
+
+    base = _ome_image(tmp_path / "base.ome.zarr", "0.5")
+
+    def fresh(name):
+        copy = tmp_path / name
+        shutil.copytree(base, copy)
+        return copy
+
+    def refused(image, message, *options):
+        before = _image_bytes(image)
+        out = tmp_path / f"out-{image.name}"
+        assert main(["segment", str(image), "-o", str(out), "-q", *options]) == 2
+        assert message in capsys.readouterr().err
+        assert _image_bytes(image) == before and not out.exists()
+
+    refused(fresh("a.ome.zarr"), "Zarr keeps for its own metadata",
+            "--labels-into-input", "zarr.json")
+    image = fresh("b.ome.zarr")
+    (image / "labels").write_text("not a group")
+    refused(image, "is a file, not the image's labels group", "--labels-into-input")
+    image = fresh("c.ome.zarr")
+    (image / "labels").mkdir()
+    (image / "labels" / "zarr.json").write_text("{garbage")
+    refused(image, "is not readable JSON", "--labels-into-input")
+    image = fresh("d.ome.zarr")
+    (image / "labels").mkdir()
+    (image / "labels" / "volseg").write_text("a user's notes")
+    refused(image, "is a file, not a labels image", "--labels-into-input", "--force")
+    if os.geteuid() != 0:                          # root writes through any mode
+        image = fresh("e.ome.zarr")
+        os.chmod(image, 0o555)
+        try:
+            refused(image, "is not writable", "--labels-into-input")
+        finally:
+            os.chmod(image, 0o755)
