@@ -287,3 +287,24 @@ def test_labels_into_input_hazards_are_refused_before_computing(tmp_path, capsys
             refused(image, "is not writable", "--labels-into-input")
         finally:
             os.chmod(image, 0o755)
+
+
+def _add_labels(args):
+    from volseg.io.ngff import write_labels_into
+
+    image, name = args
+    write_labels_into(image, np.full((40, 40, 40), len(name), np.uint8), name=name)
+    return name
+
+
+def test_writers_of_different_names_lose_no_listing_entry(tmp_path):
+    """Issue 57, #4: the listing is one shared file; eight processes adding eight names
+    at once leave all eight listed."""
+    import multiprocessing
+
+    image = _ome_image(tmp_path / "many.ome.zarr", "0.5")
+    names = [f"run{i}" for i in range(8)]
+    with multiprocessing.get_context("spawn").Pool(4) as pool:
+        assert sorted(pool.map(_add_labels, [(str(image), n) for n in names])) == names
+    meta = json.loads((image / "labels" / "zarr.json").read_text())
+    assert sorted(meta["attributes"]["ome"]["labels"]) == names

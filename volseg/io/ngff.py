@@ -305,7 +305,13 @@ def _write_labels(labels, labels_group, root, name, order, fmt, axes, factors, o
         os.rename(target, old)        # a kill here: `recover_labels` moves it back
     os.rename(staging, target)
     shutil.rmtree(old, ignore_errors=True)
-    listed = list(get_metadata(labels_group).get("labels", []))
-    if name not in listed:
-        add_metadata(labels_group, {"labels": [*listed, name]}, fmt=fmt)
-    _versioned_labels(labels_group)
+    from .output_set import FolderLock
+
+    # The listing is one file every writer of this image rewrites: one at a time (the
+    # per-name lock let two writers of different names lose each other's entry).
+    with FolderLock(root, "listing.labels", wait=True, busy="another volseg is listing"):
+        group = zarr.open_group(str(root), mode="r+")          # the listing as it is now
+        listed = list(get_metadata(group).get("labels", []))
+        if name not in listed:
+            add_metadata(group, {"labels": [*listed, name]}, fmt=fmt)
+        _versioned_labels(group)
