@@ -11,7 +11,7 @@ from numpy.typing import NDArray
 
 from ..errors import VolumeFileError  # noqa: F401 (re-exported)
 
-__all__ = ["Volume", "Frame", "VolumeFileError", "LENGTH_UNITS", "length_unit"]
+__all__ = ["Volume", "Frame", "VolumeFileError", "LENGTH_UNITS", "METRES", "length_unit"]
 
 
 #: NIfTI xform codes: 0 unknown, 1 scanner, 2 aligned, 3 Talairach, 4 MNI, 5 template.
@@ -20,6 +20,10 @@ _CODES = range(0, 6)
 #: The length units of OME-Zarr (NGFF 0.4 / 0.5, UDUNITS-2 names) that volseg keeps.
 LENGTH_UNITS = ("angstrom", "nanometer", "micrometer", "millimeter", "centimeter", "meter",
                 "kilometer", "inch", "foot")
+#: Each length unit in metres: an image whose axes differ in unit is read in its finest.
+METRES = {"angstrom": 1e-10, "nanometer": 1e-9, "micrometer": 1e-6, "millimeter": 1e-3,
+          "centimeter": 1e-2, "meter": 1.0, "kilometer": 1e3, "inch": 0.0254,
+          "foot": 0.3048}
 #: Other spellings headers use (NIfTI's 'mm' and 'micron', NRRD's 'mm', 'um', 'µm').
 UNIT_ALIASES = {"mm": "millimeter", "micron": "micrometer", "um": "micrometer",
                 "µm": "micrometer", "μm": "micrometer", "nm": "nanometer", "cm": "centimeter",

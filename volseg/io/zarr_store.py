@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import MissingChunksError
-from .volume import Frame, Volume, VolumeFileError, length_unit
+from .volume import METRES, Frame, Volume, VolumeFileError, length_unit
 
 __all__ = ["read_zarr", "write_zarr", "is_zarr"]
 
@@ -60,6 +60,7 @@ def _ome_level(group, path, level=None):
         axes_meta = scale.get("axes", [])
         axes = [a["name"] if isinstance(a, dict) else a for a in axes_meta]
         units = [a.get("unit") if isinstance(a, dict) else None for a in axes_meta]
+        _check_axis_types(path, axes_meta)
         factors, origin = [1.0] * len(axes), [0.0] * len(axes)
         for transforms in (datasets[index].get("coordinateTransformations", []),
                            scale.get("coordinateTransformations", [])):
@@ -92,6 +93,46 @@ def _ome_level(group, path, level=None):
     return array, axes, factors, origin, units
 
 
+#: NGFF axis types and the units each may carry (UDUNITS-2 names; time's for "time").
+_TIME_UNITS = ("attosecond", "centisecond", "day", "decisecond", "exasecond", "femtosecond",
+               "gigasecond", "hectosecond", "hour", "kilosecond", "megasecond", "microsecond",
+               "millisecond", "minute", "nanosecond", "petasecond", "picosecond", "second",
+               "terasecond", "yoctosecond", "yottasecond", "zeptosecond", "zettasecond")
+
+
+def _check_axis_types(path, axes_meta) -> None:
+    """An axis named x, y or z must be of type space (or untyped) with a length unit
+    (or none): a time or channel axis named z, or seconds on a space axis, is refused
+    rather than read as a length."""
+    for axis in axes_meta:
+        if not isinstance(axis, dict):
+            continue
+        name, kind, unit = axis.get("name"), axis.get("type"), axis.get("unit")
+        if name in ("x", "y", "z") and kind not in (None, "space"):
+            raise VolumeFileError(f"{path}: OME-Zarr axis {name!r} is of type {kind!r}; "
+                                  "x, y and z must be space axes")
+        if kind == "space" and unit is not None and length_unit(unit) is None:
+            what = "a time unit" if str(unit).lower() in _TIME_UNITS else "not a length unit"
+            raise VolumeFileError(f"{path}: OME-Zarr space axis {name!r} has unit {unit!r}, "
+                                  f"{what}")
+
+
+def _common_unit(path, units) -> tuple:
+    """(the unit of the frame, the factor taking each axis's sizes to it): the axes'
+    common length unit; axes in different units are taken to the finest of them (z in
+    millimetres, x and y in micrometres: micrometres); no unit on any axis: None. Some
+    axes with a unit and others without are refused (their ratio is unknown)."""
+    named = [length_unit(u) for u in units]
+    if all(u is None for u in named):
+        return None, [1.0, 1.0, 1.0]
+    if any(u is None for u in named):
+        raise VolumeFileError(f"{path}: OME-Zarr spatial axes with units {units}: some have a "
+                              "length unit and others none, so their voxel sizes cannot be "
+                              "compared")
+    finest = min(named, key=METRES.get)
+    return finest, [METRES[u] / METRES[finest] for u in named]
+
+
 #: A store declaring more chunks than this is refused before any is listed (the
 #: count alone bounds the time of the checks; 4096^3 in 16^3 chunks is 2^24).
 MAX_CHUNKS = 2**24
@@ -115,11 +156,11 @@ def _array_of(node, path, channel=None, level=None):
             raise VolumeFileError(f"{path}: OME-Zarr image of axes {axes} and shape {array.shape}: "
                                   "volseg needs three spatial axes x, y, z")
         order = [keep[[axes[i] for i in keep].index(name)] for name in ("x", "y", "z")]
-        spatial_units = {length_unit(units[i]) for i in order}
-        affine = np.diag([*(factors[i] for i in order), 1.0])
-        affine[:3, 3] = [shift[i] for i in order]
+        unit, to_unit = _common_unit(path, [units[i] for i in order])
+        affine = np.diag([*(factors[i] * f for i, f in zip(order, to_unit, strict=True)), 1.0])
+        affine[:3, 3] = [shift[i] * f for i, f in zip(order, to_unit, strict=True)]
         try:
-            frame = Frame(affine, unit=spatial_units.pop() if len(spatial_units) == 1 else None)
+            frame = Frame(affine, unit=unit)
         except ValueError as err:
             raise VolumeFileError(f"{path}: OME-Zarr scale: {err}") from None
     else:
