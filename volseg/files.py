@@ -515,8 +515,10 @@ def series_to_files(series, level, outputs, *, time_scale=1.0, relax=10, operato
     title = (f"{series.name}: isosurface {level:g} in space-time, {seg.n_regions} regions "
              f"({seg.operator.replace('_', '-')} curvature)")
     info["time_step"], info["time_unit"] = series.time_step, series.time_unit
+    info["time_offset"] = series.time_offset
     return write_series_segmentation(outputs, result, slices, info, title=title,
-                                     frame=series.frame, time_step=series.time_step)
+                                     frame=series.frame, time_step=series.time_step,
+                                     time_offset=series.time_offset)
 
 
 def segment_series_files(series, level, out_dir, *, force=False, wait=False, say=_quiet,

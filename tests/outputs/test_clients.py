@@ -201,8 +201,9 @@ def test_ngff_written_in_blocks_of_chunks_the_same_from_any_blocks(tmp_path):
 
 
 def test_isosurface_series_in_world_space_with_real_time_and_normals(tmp_path):
-    """A 4-D NIfTI, rotated, translated, 2.5 s per step: the .pvd's time values are
-    0, 2.5, 5, ..., every .vtu (read with VTK's XML reader, ParaView's) sits in the
+    """A 4-D NIfTI, rotated, translated, 2.5 s per step from 5 s (toffset): the .pvd's
+    time values are 5, 7.5, 10, ..., every .vtu's triangles are wound with their point
+    normals, every .vtu (read with VTK's XML reader, ParaView's) sits in the
     input's world coordinates (its points are the affine of the mesh's voxel
     positions) and carries unit point normals as its Normals attribute."""
     import xml.etree.ElementTree as ElementTree
@@ -219,12 +220,13 @@ def test_isosurface_series_in_world_space_with_real_time_and_normals(tmp_path):
     image.header.set_sform(affine, 2)
     image.header.set_xyzt_units("micron", "sec")
     image.header["pixdim"][4] = 2.5
+    image.header["toffset"] = 5.0                 # the first step at 5 s
     nibabel.save(image, tmp_path / "run.nii.gz")
     assert main(["isosurface", str(tmp_path / "run.nii.gz"), "--level", "0.5", "-o",
                  str(tmp_path / "o"), "-q", "--regions", "2", "--relax", "0"]) == 0
     collection = ElementTree.parse(tmp_path / "o" / "run_iso.pvd").getroot()
     steps = collection.findall("./Collection/DataSet")
-    assert [float(s.get("timestep")) for s in steps] == [0.0, 2.5, 5.0, 7.5]
+    assert [float(s.get("timestep")) for s in steps] == [5.0, 7.5, 10.0, 12.5]
     mesh = np.load(tmp_path / "o" / "run_iso.npz")
     spacing = mesh["spacing"][:3]
     affine = nibabel.load(tmp_path / "run.nii.gz").affine         # as stored (float32)
@@ -253,8 +255,14 @@ def test_isosurface_series_in_world_space_with_real_time_and_normals(tmp_path):
         downhill = (low - high)[:, :3] @ affine[:3, :3].T
         spatial = np.linalg.norm(downhill, axis=1) > 0
         assert np.mean(np.sum(normals * downhill, axis=1)[spatial] > 0) > 0.95
+        # Every triangle wound with its point normals (else ParaView shades half dark).
+        cells = vtk_to_numpy(grid.GetCells().GetConnectivityArray()).reshape(-1, 3)
+        corners = points[cells]
+        face = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+        assert np.all(np.einsum("ij,ij->i", face, normals[cells].sum(axis=1)) >= 0)
     summary = __import__("json").loads((tmp_path / "o" / "run_iso_summary.json").read_text())
     assert (summary["time_step"], summary["time_unit"]) == (2.5, "second")
+    assert summary["time_offset"] == 5.0
 
 
 def test_napari_ome_zarr_opens_an_image_and_a_labels_layer(run):

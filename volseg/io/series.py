@@ -46,6 +46,9 @@ class Series:
     time_unit : str or None
         ``"second"``, ``"millisecond"`` or ``"microsecond"`` (NIfTI's time units),
         None when unknown.
+    time_offset : float
+        The time of the first step, in `time_unit` (a 4-D NIfTI's toffset; 0 when the
+        input does not say).
     """
 
     data: NDArray
@@ -55,6 +58,7 @@ class Series:
     frame: Frame | None = None
     time_step: float = 1.0
     time_unit: str | None = None
+    time_offset: float = 0.0
 
     @property
     def shape(self) -> tuple:
@@ -81,15 +85,18 @@ _NIFTI_TIME_UNITS = {"sec": "second", "msec": "millisecond", "usec": "microsecon
 
 
 def _nifti_time(path: Path) -> tuple:
-    """(time step, unit) of a 4-D NIfTI: pixdim[4] and the xyzt_units time code; a
-    step that is not a positive finite number is 1 (unknown)."""
+    """(time step, unit, offset) of a 4-D NIfTI: pixdim[4], the xyzt_units time code
+    and toffset; a step that is not a positive finite number is 1 (unknown), an offset
+    that is not finite 0."""
     import nibabel
 
     header = nibabel.load(path).header
     zooms = header.get_zooms()
     step = float(zooms[3]) if len(zooms) > 3 else 1.0
     unit = _NIFTI_TIME_UNITS.get(header.get_xyzt_units()[1])
-    return (step, unit) if np.isfinite(step) and step > 0 else (1.0, None)
+    offset = float(header["toffset"]) if "toffset" in header else 0.0
+    offset = offset if np.isfinite(offset) else 0.0
+    return (step, unit, offset) if np.isfinite(step) and step > 0 else (1.0, None, offset)
 
 
 def _zarr_series(path: Path) -> Series:
@@ -164,8 +171,10 @@ def read_series(inputs, *, allow_external_data: bool = False) -> Series:
                                   "memory") from None
         data = _validate.volume_array(data, source=path, error=VolumeFileError, ndim=4)
         frame = frame or Frame.from_spacing((1.0, 1.0, 1.0))
-        step, unit = _nifti_time(path) if not lower.endswith(".npy") else (1.0, None)
-        return Series(data, tuple(frame.spacing), name, tuple(files), frame, step, unit)
+        step, unit, offset = (_nifti_time(path) if not lower.endswith(".npy")
+                              else (1.0, None, 0.0))
+        return Series(data, tuple(frame.spacing), name, tuple(files), frame, step, unit,
+                      offset)
     steps = [read_volume(p, allow_external_data=allow_external_data) for p in paths]
     first = steps[0]
     for path, step in zip(paths[1:], steps[1:], strict=True):

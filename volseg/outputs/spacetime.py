@@ -97,7 +97,8 @@ def _write_vtu(path, result, piece, points, normals):
     import meshio
 
     seg = result.segmentation
-    cells = [("triangle", piece.triangles)] if len(piece.triangles) else []
+    triangles = _wound_with(piece.triangles, points[piece.vertex], normals[piece.vertex])
+    cells = [("triangle", triangles)] if len(triangles) else []
     mesh = meshio.Mesh(points[piece.vertex], cells, point_data={
         "curvature": seg.curvature[piece.vertex].astype(np.float32),
         "label": seg.labels[piece.vertex].astype(np.int32),
@@ -110,6 +111,21 @@ def _write_vtu(path, result, piece, points, normals):
     text = Path(path).read_bytes()
     Path(path).write_bytes(text.replace(b"<PointData>",
                                         b'<PointData Normals="Normals" Scalars="label">', 1))
+
+
+def _wound_with(triangles, points, normals):
+    """`triangles` each wound so that its right-hand normal agrees with its vertices'
+    normals (a slice's triangles come in either order; ParaView shades a triangle
+    wound against its point normals dark: a checkerboard)."""
+    triangles = np.asarray(triangles)
+    if not len(triangles):
+        return triangles
+    corners = points[triangles]
+    face = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    against = np.einsum("ij,ij->i", face, normals[triangles].sum(axis=1)) < 0
+    out = triangles.copy()
+    out[against] = out[against][:, [0, 2, 1]]
+    return out
 
 
 def _preview_steps(slices) -> list:
@@ -160,10 +176,11 @@ def write_series_preview(path, result, slices, *, title=""):
 
 
 def write_series_segmentation(outputs, result, slices, info: dict, *, title: str,
-                              frame=None, time_step: float = 1.0) -> dict:
+                              frame=None, time_step: float = 1.0,
+                              time_offset: float = 0.0) -> dict:
     """Write mesh, ParaView series, summary and preview of `result` as one set: the
     series' meshes in `frame`'s world coordinates (default: the spacing alone), their
-    time values `time_step` apart."""
+    time values `time_step` apart from `time_offset` (a NIfTI's toffset)."""
     from ..io import Frame
 
     info = {**info, "outputs": {kind: str(path) for kind, path in outputs.targets.items()}}
@@ -182,7 +199,8 @@ def write_series_segmentation(outputs, result, slices, info: dict, *, title: str
             target = paths[f"t{piece.step:04d}"]
             _write_vtu(target, result, piece, points, normals)
             names.append(Path(outputs.targets[f"t{piece.step:04d}"]).name)
-        _write_pvd(paths["pvd"], names, [float(s.step) * time_step for s in slices])
+        _write_pvd(paths["pvd"], names,
+                   [time_offset + float(s.step) * time_step for s in slices])
         write_series_preview(paths["preview"], result, slices, title=title)
         Path(paths["summary"]).write_text(_json.dumps(info, indent=2))
 
