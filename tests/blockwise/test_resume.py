@@ -92,3 +92,47 @@ def test_a_torn_block_is_computed_again_not_fatal(tmp_path, torn):
     assert len(calls) == 2                                   # computed again
     assert all(np.array_equal(a, b) for a, b in zip(expected, got, strict=True))
     assert path.read_bytes() == whole                        # and saved whole
+
+
+def test_a_planted_block_of_other_values_is_computed_again(tmp_path):
+    """Issue 57, #8: a valid block with other values (another run's, another place's,
+    or forged without the run's key) is not reused: its digest is not its own."""
+    calls = []
+
+    def block(x, block_id=None):
+        calls.append(block_id)
+        return x * 2
+
+    work = WorkFolder(tmp_path / "w", {"input": "abc"})
+    expected = work.wrap("stage", block)(np.arange(5), block_id=(0, 0, 0))
+    path = tmp_path / "w" / "stage" / "0_0_0.npz"
+    np.savez(path, array=np.full(5, 7))                    # valid npz, other values
+    again = WorkFolder(tmp_path / "w", {"input": "abc"})
+    assert np.array_equal(again.wrap("stage", block)(np.arange(5), block_id=(0, 0, 0)),
+                          expected)
+    assert len(calls) == 2
+    # A block saved for another place is not taken for this one.
+    moved = tmp_path / "w" / "stage" / "1_0_0.npz"
+    path.rename(moved)
+    assert np.array_equal(again.wrap("stage", block)(np.arange(5) + 1, block_id=(1, 0, 0)),
+                          (np.arange(5) + 1) * 2)
+    assert len(calls) == 3
+
+
+def test_a_planted_link_is_removed_never_followed(tmp_path):
+    """A link at a stage folder would make the run write where it points: the work
+    folder holding one is emptied (the link removed, its target untouched)."""
+    outside = tmp_path / "outside"
+    outside.mkdir()
+    work = WorkFolder(tmp_path / "w", {"input": "abc"})
+    work.wrap("stage", lambda x, block_id=None: x)(np.arange(3), block_id=(0, 0, 0))
+    (tmp_path / "w" / "linked").symlink_to(outside, target_is_directory=True)
+    again = WorkFolder(tmp_path / "w", {"input": "abc"})
+    assert not again.resumed and again.finished("stage") == 0
+    assert not (tmp_path / "w" / "linked").exists()
+    again.wrap("linked", lambda x, block_id=None: x)(np.arange(3), block_id=(0, 0, 0))
+    assert list(outside.iterdir()) == []
+    whole = tmp_path / "w2"
+    whole.symlink_to(outside, target_is_directory=True)      # the folder itself a link
+    fresh = WorkFolder(whole, {"input": "abc"})
+    assert not whole.is_symlink() and not fresh.resumed and list(outside.iterdir()) == []

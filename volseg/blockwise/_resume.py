@@ -13,12 +13,15 @@ with its result (an array or a tuple of arrays) saved as
 present. A file appears by atomic rename once complete, so a run killed mid-write
 leaves no block that looks finished, and it is fsynced first, so a power loss
 leaves it whole or absent; a torn block found anyway (empty, truncated: its zip
-CRCs disagree) is removed and computed again. The pipeline removes the folder once
-its outputs are committed.
+CRCs disagree) is removed and computed again, and so is a block whose digest (the
+run's key, the stage, the block's index and its values) is not its own. A folder
+holding a link anywhere is emptied, the link removed, never followed. The pipeline
+removes the folder once its outputs are committed.
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import shutil
@@ -37,16 +40,19 @@ class WorkFolder:
         self.key = json.loads(json.dumps(key))        # as stored: lists, not tuples
         stored = self.folder / "key.json"
         try:
-            same = json.loads(stored.read_text()) == self.key
+            same = _only_own_entries(self.folder) and json.loads(stored.read_text()) == self.key
         except (OSError, ValueError):
             same = False
         if not same:
+            if self.folder.is_symlink():              # a link is removed, never followed
+                self.folder.unlink()
             shutil.rmtree(self.folder, ignore_errors=True)
             self.folder.mkdir(parents=True)
             temporary = stored.with_suffix(".tmp")
             temporary.write_text(json.dumps(self.key, indent=1))
             os.replace(temporary, stored)
         self.resumed = same
+        self.digest = hashlib.sha256(json.dumps(self.key, sort_keys=True).encode()).hexdigest()
 
     def finished(self, stage: str) -> int:
         """How many blocks of `stage` are on disk."""
@@ -56,14 +62,15 @@ class WorkFolder:
     def wrap(self, stage: str, function):
         folder = self.folder / stage
         folder.mkdir(exist_ok=True)
-        return _Cached(str(folder), function)
+        return _Cached(str(folder), function, f"{self.digest}/{stage}")
 
     def array(self, stage: str, chunks, dtype):
         """A lazy Dask array of `stage`'s blocks as saved by `wrap` (each block an
         array), read back; a block that is not on disk is an error."""
         import dask.array as da
 
-        return da.map_blocks(_Cached(str(self.folder / stage), _not_saved), chunks=chunks,
+        return da.map_blocks(_Cached(str(self.folder / stage), _not_saved,
+                                     f"{self.digest}/{stage}"), chunks=chunks,
                              dtype=dtype, meta=np.empty((0,) * len(chunks), dtype))
 
     def remove(self):
@@ -74,37 +81,74 @@ class _Cached:
     """A per-block function whose results are kept in a folder (picklable, for
     distributed workers: a path and the function)."""
 
-    def __init__(self, folder: str, function):
-        self.folder, self.function = folder, function
+    def __init__(self, folder: str, function, tag: str = ""):
+        self.folder, self.function, self.tag = folder, function, tag
 
     def __call__(self, *blocks, block_id=None):
-        path = os.path.join(self.folder, "_".join(map(str, block_id)) + ".npz")
-        if os.path.exists(path):
-            saved = _load(path)
+        name = "_".join(map(str, block_id))
+        path = os.path.join(self.folder, name + ".npz")
+        if os.path.lexists(path):
+            saved = _load(path, f"{self.tag}/{name}")
             if saved is not None:
                 return saved
         result = self.function(*blocks, block_id=block_id)
         items = ({"array": result} if isinstance(result, np.ndarray)
                  else {f"item{i}": np.asarray(r) for i, r in enumerate(result)})
+        items[DIGEST] = np.frombuffer(_digest(f"{self.tag}/{name}", items), np.uint8)
         write_atomically(path, np.savez, durable=True, **items)
         return result
 
 
-def _load(path):
+#: The member of a saved block holding its digest: SHA-256 of the run's key, the stage,
+#: the block's index and its arrays, so a block of another run, stage or place, or with
+#: other values, is computed again rather than reused.
+DIGEST = "_digest"
+
+
+def _digest(tag: str, items: dict) -> bytes:
+    digest = hashlib.sha256(tag.encode())
+    for member in sorted(k for k in items if k != DIGEST):
+        array = np.ascontiguousarray(items[member])
+        digest.update(f"{member}:{array.dtype.str}:{array.shape}".encode())
+        digest.update(array.tobytes())
+    return digest.digest()
+
+
+def _only_own_entries(folder: Path) -> bool:
+    """True when `folder` is a real folder whose entries are all real files and folders
+    (no link: a planted one would make the run write where it points)."""
+    if folder.is_symlink() or not folder.is_dir():
+        return False
+    for root, folders, files in os.walk(folder, followlinks=False):
+        for entry in (*folders, *files):
+            path = os.path.join(root, entry)
+            if os.path.islink(path) or not (os.path.isdir(path) or os.path.isfile(path)):
+                return False
+    return True
+
+
+def _load(path, tag: str = ""):
     """A saved block, or None (the file removed) when it is torn: empty, truncated or
-    not what `_Cached` writes (what a power loss or a full disk leaves). Its zip
-    members carry CRCs, so a torn block is not read as data."""
+    not what `_Cached` writes (what a power loss or a full disk leaves), a link, or
+    its digest not that of this run's block with these values. Its zip members carry
+    CRCs, so a torn block is not read as data."""
     import zipfile
 
     try:
+        if os.path.islink(path) or not os.path.isfile(path):
+            raise ValueError("not a regular file")
         # (closed on any error)
         with NPY_READ_LOCK, open(path, "rb") as file, np.load(file) as saved:
-            if "array" in saved.files:
-                return saved["array"]
-            items = tuple(saved[f"item{i}"] for i in range(len(saved.files)))
-            if not items:
-                raise ValueError("no arrays")
-            return items
+            members = {k: saved[k] for k in saved.files}
+        stored = members.pop(DIGEST, None)
+        if stored is None or stored.tobytes() != _digest(tag, members):
+            raise ValueError("digest")
+        if "array" in members:
+            return members["array"]
+        items = tuple(members[f"item{i}"] for i in range(len(members)))
+        if not items:
+            raise ValueError("no arrays")
+        return items
     except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile):
         try:
             os.unlink(path)
