@@ -252,7 +252,9 @@ def write_preview(path, volume, curvature, labels, *, title="", persistence=None
     indices, sliced = _mid_slices(volume, curvature, labels)
     lo, hi, k = _range_and_count(volume, labels, value_range, n_labels)
     mids = sliced[1]
-    limit = float(np.percentile(np.abs(np.concatenate([m.ravel() for m in mids])), 99)) or 1.0
+    shown = np.concatenate([m.ravel() for m in mids])
+    limit = float(np.percentile(np.abs(shown), 99)) or 1.0
+    signed = bool(shown.size and shown.min() < 0)      # else (gradient) 0 .. limit only
     rows = []
     for row, axis in enumerate("xyz"):
         vol, cur, lab = sliced[0][row].T, sliced[1][row].T, sliced[2][row].T
@@ -279,8 +281,9 @@ def write_preview(path, volume, curvature, labels, *, title="", persistence=None
     _colour_bar(canvas, draw, _LEFT, bar_y, _BOX, gray(ramp, 0, 1),
                 [(0, f"{lo:.4g}"), (1, f"{hi:.4g}")], "value", small)
     _colour_bar(canvas, draw, _LEFT + _BOX + _GAP, bar_y, _BOX,
-                diverging(np.linspace(-limit, limit, _BOX), limit),
-                [(0, f"{-limit:.3g}"), (0.5, "0"), (1, f"{limit:.3g}")],
+                diverging(np.linspace(-limit if signed else 0.0, limit, _BOX), limit),
+                [(0, f"{-limit:.3g}"), (0.5, "0"), (1, f"{limit:.3g}")] if signed
+                else [(0, "0"), (1, f"{limit:.3g}")],
                 "mean curvature (+ peak, - valley)" if field == "curvature" else field, small)
     if curve is not None:
         canvas.paste(Image.fromarray(curve), (_LEFT, bar_y + 62))
