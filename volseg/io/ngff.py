@@ -105,41 +105,56 @@ def _in_write_blocks(level):
     return level.rechunk(edges)
 
 
-def _written_levels(levels, group, axes, transforms, name) -> list:
-    """Lazy writes of `levels` as `group`'s arrays s0, s1, ... in `NGFF_CHUNK` chunks,
-    each task a block of chunks (`_in_write_blocks`), and their ``multiscales``
-    metadata, which ome-zarr-py writes. Through ome-zarr-py's own writer each chunk of
-    64^3 was a task of its own, with the rechunks before it: 41 567 tasks for a 1024^3
-    result's image, most of the run's tasks on a cluster."""
+def _written_levels(levels, group, axes) -> list:
+    """Lazy writes of `levels` (Dask) as `group`'s arrays s0, s1, ... in `NGFF_CHUNK`
+    chunks, each task a block of chunks (`_in_write_blocks`). Through ome-zarr-py's own
+    writer each chunk of 64^3 was a task of its own, with the rechunks before it: 41 567
+    tasks for a 1024^3 result's image, most of the run's tasks on a cluster."""
     import dask.array as da
-
-    with warnings.catch_warnings():     # its own deprecated default argument, at import
-        warnings.simplefilter("ignore", DeprecationWarning)
-        from ome_zarr.writer import write_multiscales_metadata
 
     writes = []
     for i, level in enumerate(levels):
         component = f"{group.path}/s{i}" if group.path else f"s{i}"
         writes.append(da.to_zarr(
             _in_write_blocks(level), url=group.store, component=component, compute=False,
-            zarr_format=3, chunks=tuple(min(NGFF_CHUNK, max(int(n), 1)) for n in level.shape),
+            zarr_format=3, chunks=_chunks(level.shape),
             dimension_names=[a["name"] for a in axes], **STORAGE))
-    write_multiscales_metadata(group, [{"path": f"s{i}", "coordinateTransformations": t}
-                                       for i, t in enumerate(transforms)], axes=axes, name=name)
     return writes
+
+
+def _chunks(shape) -> tuple:
+    return tuple(min(NGFF_CHUNK, max(int(n), 1)) for n in shape)
+
+
+def _coarsened(level):
+    """A mean level below `level` (numpy, float32): each 2x2x2 block's mean in float64,
+    rounded once, the excess edge voxels dropped; what ``dask.array.coarsen(_mean64,
+    ..., trim_excess=True)`` gives on a Dask level, bit for bit."""
+    z, y, x = (n - n % 2 for n in level.shape)
+    blocks = level[:z, :y, :x].reshape(z // 2, 2, y // 2, 2, x // 2, 2)
+    return _mean64(blocks, axis=(1, 3, 5)).astype(np.float32)
+
+
+def _multiscales(group, transforms, axes, name, image_label=False) -> None:
+    """NGFF 0.5 metadata of `group`'s levels s0, s1, ...: the ``ome`` block with its
+    ``multiscales`` (and, for a labels image, ``image-label`` pointing at the image
+    two groups up), as ome-zarr-py writes them."""
+    ome = {"version": "0.5", "multiscales": [{
+        "datasets": [{"path": f"s{i}", "coordinateTransformations": t}
+                     for i, t in enumerate(transforms)],
+        "name": name, "axes": axes}]}
+    if image_label:
+        ome["image-label"] = {"source": {"image": "../../"}, "version": "0.5"}
+    group.attrs["ome"] = ome
 
 
 def write_ngff(path, labels, curvature, frame: Frame, name: str = "curvature") -> Path:
     """Write `labels` and `curvature` ((X, Y, Z) numpy or Dask arrays, one shape) as
-    the OME-Zarr image `path` (a new folder; its parent must exist); `name`: the
-    image's multiscale name, the field it holds."""
-    import dask
-    import dask.array as da
+    the OME-Zarr (NGFF 0.5) image `path` (a new folder; its parent must exist); `name`:
+    the image's multiscale name, the field it holds. Arrays in memory are written by
+    Zarr alone (no Dask, no ome-zarr-py: a small run's write imported 0.6 s of them);
+    Dask arrays block by block, the same bytes."""
     import zarr
-
-    with warnings.catch_warnings():     # its own deprecated default argument, at import
-        warnings.simplefilter("ignore", DeprecationWarning)
-        from ome_zarr.writer import write_label_metadata
 
     path = Path(path)
     if tuple(labels.shape) != tuple(curvature.shape) or len(labels.shape) != 3:
@@ -148,24 +163,45 @@ def write_ngff(path, labels, curvature, frame: Frame, name: str = "curvature") -
     spacing = np.array(frame.spacing)[::-1]            # z, y, x
     origin = frame.affine[:3, 3][::-1]
     axes = _space_axes("zyx", [frame.unit] * 3)
-    label_levels = _label_pyramid(labels, (2, 1, 0), WRITE_BLOCK)
+    lazy = hasattr(labels, "dask") or hasattr(curvature, "dask")
+    if lazy:
+        import dask.array as da
+
+        label_levels = _label_pyramid(labels, (2, 1, 0), WRITE_BLOCK)
+        mean_levels = [_level0(curvature, (2, 1, 0), WRITE_BLOCK).astype(np.float32)]
+        for _ in range(len(label_levels) - 1):
+            mean_levels.append(_in_write_blocks(da.coarsen(
+                _mean64, mean_levels[-1], {0: 2, 1: 2, 2: 2}, trim_excess=True)
+                .astype(np.float32)))
+    else:
+        label_levels = [np.ascontiguousarray(np.asarray(labels).transpose(2, 1, 0))]
+        mean_levels = [np.ascontiguousarray(np.asarray(curvature).transpose(2, 1, 0),
+                                            dtype=np.float32)]
+        for _ in range(pyramid_levels(label_levels[0].shape)):
+            label_levels.append(np.ascontiguousarray(label_levels[-1][::2, ::2, ::2]))
+            mean_levels.append(_coarsened(mean_levels[-1]))
     levels = len(label_levels) - 1
-    mean_levels = [_level0(curvature, (2, 1, 0), WRITE_BLOCK).astype(np.float32)]
-    for _ in range(levels):
-        mean_levels.append(_in_write_blocks(da.coarsen(
-            _mean64, mean_levels[-1], {0: 2, 1: 2, 2: 2}, trim_excess=True).astype(np.float32)))
     # Level i's voxel size is 2^i of level 0's; nearest sampling keeps level 0's first
     # voxel centre, a 2^i mean's centre is (2^i - 1) / 2 voxels further.
     label_transforms = [_transforms(spacing * 2**i, origin) for i in range(levels + 1)]
     mean_transforms = [_transforms(spacing * 2**i, origin + spacing * (2**i - 1) / 2)
                        for i in range(levels + 1)]
-    root = zarr.open_group(str(path), mode="w-")
-    writes = _written_levels(mean_levels, root, axes, mean_transforms, name)
-    writes += _written_levels(label_levels, root.require_group("labels/regions"), axes,
-                              label_transforms, "regions")
-    dask.compute(*writes)
-    write_label_metadata(root["labels"], "regions", source={"image": "../../"})
-    _versioned_labels(root["labels"])
+    root = zarr.open_group(str(path), mode="w-", zarr_format=3)
+    regions = root.require_group("labels/regions")
+    if lazy:
+        import dask
+
+        dask.compute(*_written_levels(mean_levels, root, axes),
+                     *_written_levels(label_levels, regions, axes))
+    else:
+        for group, written in ((root, mean_levels), (regions, label_levels)):
+            for i, level in enumerate(written):
+                group.create_array(f"s{i}", data=level, chunks=_chunks(level.shape),
+                                   dimension_names=[a["name"] for a in axes],
+                                   config=STORAGE["config"])
+    _multiscales(root, mean_transforms, axes, name)
+    _multiscales(regions, label_transforms, axes, "regions", image_label=True)
+    root["labels"].attrs["ome"] = {"version": "0.5", "labels": ["regions"]}
     return path
 
 
@@ -220,6 +256,13 @@ def _labels_lock(root: Path, name: str):
     return FolderLock(root, f"{name}.labels", busy="another volseg is adding these labels")
 
 
+def _listing_lock(root: Path):
+    """The lock of ``labels/``'s own metadata (its listing), waited for."""
+    from .output_set import FolderLock
+
+    return FolderLock(root, "listing.labels", wait=True, busy="another volseg is listing")
+
+
 def _recover(root: Path, name: str) -> None:
     staging, old, target = (root / f".{name}.volseg-staging", root / f".{name}.volseg-old",
                             root / name)
@@ -272,7 +315,9 @@ def write_labels_into(image, labels, *, name: str = "volseg", level: int = 0,
     fmt = FormatV05() if "ome" in group.attrs.asdict() else FormatV04()
     root = image / "labels"
     target = root / name
-    labels_group = group.require_group("labels")
+    root.mkdir(exist_ok=True)
+    with _listing_lock(root):     # two first writers would each create (empty) labels/
+        labels_group = group.require_group("labels")
     with _labels_lock(root, name):
         _recover(root, name)
         if target.exists() and not force:
@@ -305,11 +350,9 @@ def _write_labels(labels, labels_group, root, name, order, fmt, axes, factors, o
         os.rename(target, old)        # a kill here: `recover_labels` moves it back
     os.rename(staging, target)
     shutil.rmtree(old, ignore_errors=True)
-    from .output_set import FolderLock
-
     # The listing is one file every writer of this image rewrites: one at a time (the
     # per-name lock let two writers of different names lose each other's entry).
-    with FolderLock(root, "listing.labels", wait=True, busy="another volseg is listing"):
+    with _listing_lock(root):
         group = zarr.open_group(str(root), mode="r+")          # the listing as it is now
         listed = list(get_metadata(group).get("labels", []))
         if name not in listed:
