@@ -293,3 +293,20 @@ def test_a_degenerate_cut_is_a_warning_from_the_api_and_a_line_even_with_q(tmp_p
     err = capsys.readouterr().err
     lines = [line for line in err.splitlines() if line.startswith("volseg: warning:")]
     assert len(lines) == 1 and "largest of 30" in lines[0], err
+
+
+def test_help_names_every_input_format_and_operator(capsys):
+    """`volseg segment --help` lists what read_volume reads (from the readers' table,
+    not a copy) and what each --operator is (issue 58)."""
+    from volseg.cli import main
+    from volseg.curvature import REGISTRY
+    from volseg.io.readers import _READERS
+
+    assert main(["segment", "--help"]) == 0
+    text = " ".join(capsys.readouterr().out.split())
+    for suffixes, _ in _READERS:
+        for suffix in suffixes:
+            assert suffix in text
+    assert "OME-Zarr" in text and "TIFF" in text and ".raw" in text
+    for operator in REGISTRY.values():
+        assert operator.label in text

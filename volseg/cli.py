@@ -17,9 +17,11 @@ import numpy as np
 from . import _json, _validate
 from ._version import __version__
 from .blockwise.engine import MEMORY_SHARE, default_memory_limit, parse_bytes
+from .curvature import REGISTRY as OPERATOR_REGISTRY
 from .curvature import cli_choices, normalize_operator
 from .errors import UsageError
 from .fields import FIELD_REGISTRY
+from .io.readers import INPUT_FORMATS
 from .morse import MEASURES
 from .segment import (
     AUTO_INTEGER_SIGMA,
@@ -44,6 +46,11 @@ def _get_parser() -> argparse.ArgumentParser:
     return parser
 
 
+#: The curvature operators, for --operator's help (the registry's labels).
+OPERATOR_HELP = ("the curvature operator (with --field curvature): " + "; ".join(
+    f"{op.name.replace('_', '-')}: {op.label}" for op in OPERATOR_REGISTRY.values())
+    + " (default weighted, the paper's mean-curvature estimate)")
+
 _MEASURE_HELP = (
     "what decides which regions survive the cut (default: the field's, "
     f"{DEFAULT_MEASURE} for curvature and value, volume for gradient, area where "
@@ -57,10 +64,11 @@ _MEASURE_HELP = (
 def _add_segment(sub):
     seg = sub.add_parser("segment", help="segment volume files or named datasets")
     seg.add_argument("inputs", nargs="+", metavar="INPUT",
-                     help="a volume file (.raw, .dat, .nrrd, .nii, .npy) or a dataset name")
+                     help=f"a volume ({INPUT_FORMATS}) or a dataset name")
     seg.add_argument("-o", "--out-dir", default=".", help="output folder (default: .)")
     operators, shown = cli_choices()
-    seg.add_argument("--operator", choices=operators, metavar=shown, default="weighted")
+    seg.add_argument("--operator", choices=operators, metavar=shown, default="weighted",
+                     help=OPERATOR_HELP)
     cut = seg.add_mutually_exclusive_group()
     cut.add_argument("--regions", type=_regions, metavar="K",
                      help=f"number of regions (default {DEFAULT_REGIONS}; with a mask, foreground "

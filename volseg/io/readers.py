@@ -446,19 +446,11 @@ def is_tiff_folder(path) -> bool:
 
 def _reader(path: Path):
     name = path.name.lower()
-    if name.endswith((".mha", ".mhd")):
-        return _read_metaimage
-    if name.endswith((".tif", ".tiff")):
-        return _read_tiff
-    if name.endswith((".nii", ".nii.gz")):
-        return _read_nifti
-    if name.endswith((".nrrd", ".nhdr")):
-        return _read_nrrd
-    if name.endswith(".npy"):
-        return _read_npy
-    if name.endswith(".dat"):
-        return _read_dat
+    for suffixes, reader in _READERS:
+        if name.endswith(suffixes):
+            return reader
     return _read_raw
+
 
 
 def compressed_shape(path):
@@ -586,3 +578,14 @@ def read_volume(path, *, shape=None, dtype=None, byte_order=None,
         raise VolumeFileError(f"{path}: voxel sizes must be in [{low:g}, {high:g}], got "
                               f"{frame.spacing}") from None
     return Volume(data, frame=frame, name=short, source=source, path=path, files=files)
+
+
+#: Each file format's suffixes and its reader; a name with none of them is raw. Zarr
+#: stores (folders) and TIFF folders are told apart before (`read_volume`).
+_READERS = (((".mha", ".mhd"), _read_metaimage), ((".tif", ".tiff"), _read_tiff),
+            ((".nii", ".nii.gz"), _read_nifti), ((".nrrd", ".nhdr"), _read_nrrd),
+            ((".npy",), _read_npy), ((".dat",), _read_dat))
+#: What `read_volume` reads, for help texts: every suffix above, raw, and the stores.
+INPUT_FORMATS = ", ".join(
+    [".raw (shape and type in the name)"] + [" / ".join(s) for s, _ in _READERS]
+    + ["a Zarr or OME-Zarr store", "a folder of TIFF slices"])
