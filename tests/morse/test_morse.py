@@ -394,3 +394,23 @@ def test_integers_beyond_2_53_are_refused_not_rounded_into_one_plateau():
         descending_complex(field)
     small = np.array([0, 2**53, 2**53 - 2, 2**53 - 1, 0], dtype=np.int64)
     assert len(descending_complex(small).maxima) == 2
+
+
+def test_region_tops_are_each_regions_first_maximum_without_a_sort():
+    """`region_tops` (a cut's highest maximum per region, O(M)) equals the first index of
+    each region, on real cuts with dropped components (-1) and on any numbering."""
+    from volseg.morse.cuts import region_tops
+
+    rng = np.random.default_rng(3)
+    field = rng.random((14, 13, 12))
+    mask = field > 0.2
+    hierarchy = descending_complex(field, mask=mask)
+    for k in (1, 4, 40):
+        for min_component in (0.0, 0.01):
+            region = hierarchy.region_of_maximum(n_regions=k, min_component=min_component)
+            count = int(region.max()) + 1
+            ids, first = np.unique(region, return_index=True)
+            assert np.array_equal(region_tops(region, count), first[ids >= 0])
+    shuffled = np.array([2, 2, 0, -1, 1, 0, 2])           # not numbered in first order
+    assert np.array_equal(region_tops(shuffled, 3), [2, 4, 0])
+    assert len(region_tops(np.array([], dtype=np.int64), 0)) == 0

@@ -77,19 +77,35 @@ def report_of(hierarchy, masked: bool, cut) -> tuple:
     region = hierarchy.region_of_maximum(**asked)
     k = int(region.max()) + 1
     record = record_of(cut, asked, k, hierarchy)
-    # Maximum ids run by decreasing value: the first id seen per region is its top
-    # (-1, a dropped component, sorts first).
-    ids, tops = np.unique(region, return_index=True)
-    tops = tops[ids >= 0]
-    persistence = hierarchy.event_persistence
-    if len(persistence) > LISTED_PERSISTENCES:
-        persistence = persistence[np.argpartition(persistence, -LISTED_PERSISTENCES)
-                                  [-LISTED_PERSISTENCES:]]
-    persistence = np.sort(persistence)[::-1]
-    extinction, components = hierarchy.curve(cut.measure, asked["min_component"])
+    tops = region_tops(region, k)
+    # What is the same for every cut of the hierarchy, once per hierarchy (a viewer's
+    # slider cuts it again and again).
+    cache = hierarchy._pruned
+    if "listed_persistence" not in cache:
+        persistence = hierarchy.event_persistence
+        if len(persistence) > LISTED_PERSISTENCES:
+            persistence = persistence[np.argpartition(persistence, -LISTED_PERSISTENCES)
+                                      [-LISTED_PERSISTENCES:]]
+        cache["listed_persistence"] = np.sort(persistence)[::-1]
+        cache["persistence"] = hierarchy.persistence
+    key = ("curve_sample", cut.measure, asked["min_component"])
+    if key not in cache:
+        cache[key] = curve_sample(*hierarchy.curve(cut.measure, asked["min_component"]))
     report = CutReport(
         record, k, hierarchy.maxima[tops].astype(np.int64), hierarchy.values[tops].copy(),
-        hierarchy.persistence[tops], len(hierarchy.maxima), int(hierarchy.n_components),
-        len(hierarchy.young), persistence,
-        curve_sample(extinction, components))
+        cache["persistence"][tops], len(hierarchy.maxima), int(hierarchy.n_components),
+        len(hierarchy.young), cache["listed_persistence"].copy(), cache[key])
     return region, report
+
+
+def region_tops(region, k: int) -> np.ndarray:
+    """The first maximum (its highest: ids run by decreasing value) of each region
+    0..k-1 of `region` (-1: a dropped component). Cuts number regions in the order
+    their first maximum comes, so the firsts are where the running maximum of the ids
+    steps up: O(M), no sort; any other numbering takes `np.unique`'s sort."""
+    running = np.maximum.accumulate(region) if len(region) else region
+    steps = np.flatnonzero(np.diff(running, prepend=-1) > 0)
+    if len(steps) == k and np.array_equal(region[steps], np.arange(k)):
+        return steps
+    ids, tops = np.unique(region, return_index=True)
+    return tops[ids >= 0]
