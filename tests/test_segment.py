@@ -262,6 +262,11 @@ def test_recut_equals_a_fresh_segmentation_and_reuses_a_buffer():
         base.region(10)
     with pytest.raises(ValueError, match="`out`"):
         base.recut(3, out=np.zeros(5, np.int32))
+    # A smaller integer type (a viewer's texture) holds the same labels, or is refused.
+    small = np.zeros(data.shape, np.uint8)
+    assert np.array_equal(base.recut(9, out=small).labels, base.recut(9).labels)
+    with pytest.raises(ValueError, match="cannot hold label 300"):
+        base.hierarchy.relabel(np.arange(300), out=np.zeros(base.labels.shape, np.uint8))
 
 
 def test_a_nibabel_image_segments_as_the_command_line_segments_its_file(tmp_path, capsys):

@@ -202,7 +202,7 @@ class Segmentation:
 
         The arguments are `segment_volume`'s; `measure` defaults to this cut's (to
         persistence with `min_persistence`) and the cut keeps its `min_component`.
-        `out`: an int32 array of the labels' shape to write the labels into (in-memory
+        `out`: an integer array of the labels' shape to write the labels into (in-memory
         results; a viewer reuses its buffer rather than allocating one per cut).
         """
         if measure is None:

@@ -12,6 +12,9 @@ from volseg.io import Frame, write_volume
 
 from .conftest import missing
 
+if not missing():
+    from volseg.napari_plugin import open_in
+
 if missing():
     pytest.skip(missing(), allow_module_level=True)
 
@@ -46,8 +49,36 @@ def test_manifest_names_the_reader_widget_and_sample():
     for command in commands.values():      # every command resolves to an object
         module, name = command.split(":")
         assert hasattr(__import__(module, fromlist=[name]), name), command
-    assert manifest.contributions.readers[0].accepts_directories
     assert "*_summary.json" in manifest.contributions.readers[0].filename_patterns
+    menu = {item.command for item in manifest.contributions.menus["napari/file/io_utilities"]}
+    assert menu == {"volseg.open_file", "volseg.open_folder"}
+
+
+def test_the_reader_claims_only_what_no_other_reader_opens(make_napari_viewer, tmp_path):
+    """A .nii.gz, .tif, .npy, .mha or Zarr store opened (or dropped) with volseg
+    installed goes to napari's own readers with no question; volseg's summaries and
+    the formats only it reads are its own, and anything else opens by name."""
+    import npe2
+
+    manager = npe2.PluginManager.instance()
+    manager.discover()
+    store = tmp_path / "image.ome.zarr"
+    store.mkdir()
+
+    def claims(path):
+        return any(r.plugin_name == "volseg" for r in manager.iter_compatible_readers([path]))
+
+    for name in ("scan.nii.gz", "scan.nii", "stack.tif", "stack.tiff", "a.npy", "ct.mha",
+                 "ct.mhd", str(store), str(tmp_path)):
+        assert not claims(str(tmp_path / name)), name
+    for name in ("fuel_summary.json", "fuel.raw", "fuel.dat", "ct.nrrd", "ct.nhdr"):
+        assert claims(str(tmp_path / name)), name
+    # A .tif opened as a user opens it: napari's own reader, no question asked.
+    import tifffile
+
+    tifffile.imwrite(tmp_path / "stack.tif", np.zeros((4, 5, 6), np.uint8))
+    layer, = make_napari_viewer().open(str(tmp_path / "stack.tif"), plugin=None)
+    assert layer.data.shape == (4, 5, 6)
 
 
 @pytest.fixture
@@ -67,7 +98,7 @@ def rotated_um_nifti(tmp_path):
 
 def test_reader_places_the_input_as_its_frame(make_napari_viewer, rotated_um_nifti, tmp_path):
     viewer = make_napari_viewer()
-    layer, = viewer.open(str(rotated_um_nifti), plugin="volseg")
+    layer, = open_in(viewer, rotated_um_nifti)
     volume = layer.metadata["volseg_volume"]
     assert layer.data.shape == volume.shape[::-1]           # z, y, x
     assert np.array_equal(np.asarray(layer.data), np.asarray(volume.data).transpose(2, 1, 0))
@@ -80,7 +111,7 @@ def test_reader_places_the_input_as_its_frame(make_napari_viewer, rotated_um_nif
     plain = tmp_path / "plain.nii.gz"
     write_volume(plain, np.zeros((6, 7, 8), np.float32), frame=Frame(
         np.array([[0.5, 0, 0, 1], [0, 2, 0, 2], [0, 0, 3, 3], [0, 0, 0, 1.0]])))
-    layer, = viewer.open(str(plain), plugin="volseg")
+    layer, = open_in(viewer, plain)
     assert tuple(layer.scale) == (3, 2, 0.5) and tuple(layer.translate) == (3, 2, 1)
     assert np.allclose(layer.affine.affine_matrix, np.eye(4))
 
@@ -104,19 +135,19 @@ def test_reader_opens_an_output_set_and_the_ngff_output(make_napari_viewer, tmp_
     assert main(["segment", str(volume), "--out-dir", str(tmp_path / "out"), "--regions", "6",
                  "-q"]) == 0
     viewer = make_napari_viewer()
-    curvature, labels = viewer.open(str(tmp_path / "out" / "blobs_summary.json"),
-                                    plugin="volseg")
+    # A summary is volseg's alone: napari opens it without a question (plugin None
+    # is a drop or File > Open: napari chooses among the compatible readers).
+    curvature, labels = viewer.open(str(tmp_path / "out" / "blobs_summary.json"), plugin=None)
     assert labels._type_string == "labels" and curvature._type_string == "image"
     import nibabel
 
     expected = np.asanyarray(nibabel.load(tmp_path / "out" / "blobs_labels.nii.gz").dataobj)
     assert np.array_equal(np.asarray(labels.data), expected.transpose(2, 1, 0))
     assert tuple(labels.scale) == (2, 2, 2) and tuple(labels.translate) == (7, 6, 5)
-    alone, = viewer.open(str(tmp_path / "out" / "blobs_labels.nii.gz"), plugin="volseg")
+    alone, = open_in(viewer, tmp_path / "out" / "blobs_labels.nii.gz")
     assert alone._type_string == "labels" and tuple(alone.translate) == (7, 6, 5)
     assert np.array_equal(np.asarray(alone.data), expected.transpose(2, 1, 0))
-    curvature_ngff, labels_ngff = viewer.open(
-        str(tmp_path / "out" / "blobs_segmentation.ome.zarr"), plugin="volseg")
+    curvature_ngff, labels_ngff = open_in(viewer, tmp_path / "out" / "blobs_segmentation.ome.zarr")
     assert np.array_equal(np.asarray(labels_ngff.data[0] if labels_ngff.multiscale
                                      else labels_ngff.data), expected.transpose(2, 1, 0))
     assert tuple(labels_ngff.scale) == (2, 2, 2) and tuple(labels_ngff.translate) == (7, 6, 5)
@@ -132,6 +163,10 @@ def test_widget_labels_equal_segment_volume_and_the_slider_recuts(make_napari_vi
     assert np.array_equal(widget.labels_layer.data, expected.labels)
     assert np.array_equal(widget.curvature_layer.data, expected.curvature)
     assert tuple(widget.labels_layer.scale) == (1.0, 1.5, 2.0)
+    # The smallest type that holds every cut (a quarter of int32's texture)...
+    assert widget.labels_layer.data.dtype == np.uint8 and widget.live.max_regions() < 256
+    # ... and the output set still gets the CLI's int32.
+    assert widget.live.snapshot().labels.dtype == np.int32
     assert result.n_regions == 8 and widget.count_box.value() == 8
     for k in (3, 12, 5, 1):
         widget.count_box.setValue(k)             # as a user types it
@@ -142,14 +177,20 @@ def test_widget_labels_equal_segment_volume_and_the_slider_recuts(make_napari_vi
     top = widget.live.max_regions()
     for position in (0, 250, 500, 999, 1000):
         widget.count_slider.setValue(position)   # as a user drags it
+        widget._count_throttled.flush()          # the drag's last position ...
+        widget.wait_for_cut()                    # ... cut in its thread, and shown
         k = widget.count_box.value()
         assert k == min(max(round(top ** (position / 1000)), 1), top)
         assert np.array_equal(widget.labels_layer.data,
                               expected.hierarchy.segment(**_count_cut(expected, k)))
     # The threshold slider cuts by the measure; the count follows.
     widget.threshold_slider.setValue(widget.threshold_slider.maximum())
+    widget._threshold_throttled.flush()
+    widget.wait_for_cut()
     assert widget.live.result.n_regions == expected.hierarchy.n_components
     widget.threshold_slider.setValue(0)
+    widget._threshold_throttled.flush()
+    widget.wait_for_cut()
     assert widget.live.result.n_regions == widget.live.max_regions()
     # Another measure recuts at once, with the same count, and its own curve.
     widget.count_box.setValue(6)
@@ -188,6 +229,44 @@ def test_widget_segments_the_field_chosen_and_names_it(make_napari_viewer, qtbot
     assert widget.live.result.measure == "volume"
 
 
+def test_a_slider_drag_cuts_at_most_once_per_throttle_period(make_napari_viewer, qtbot):
+    """A drag over 40 positions, one every 10 ms (a quick drag at 100 Hz), cuts at most
+    10 times, each in a thread (the main thread only shows it), and the labels end as
+    the last position's cut; the marker on the curve is painted with the window (no
+    synchronous repaint)."""
+    import threading
+
+    from volseg.napari_plugin._widget import SLIDER_THROTTLE_MS
+
+    viewer = make_napari_viewer()
+    viewer.add_image(demo_volume(32), name="blobs")
+    widget = _widget(viewer)
+    expected = _run(qtbot, widget, regions=8)
+    cuts, threads = [], set()
+    prepare = widget.live.prepare
+
+    def counted(*args, **kwargs):
+        cuts.append(kwargs)
+        threads.add(threading.current_thread() is threading.main_thread())
+        return prepare(*args, **kwargs)
+
+    widget.live.prepare = counted
+    repaints = []
+    widget.canvas.repaint = lambda *args: repaints.append(args)
+    for position in np.linspace(0, 1000, 40).astype(int):
+        widget.count_slider.setValue(int(position))
+        qtbot.wait(10)
+    qtbot.wait(3 * SLIDER_THROTTLE_MS)
+    widget.wait_for_cut()
+    assert 2 <= len(cuts) <= 10, cuts
+    assert threads == {False}
+    top = widget.live.max_regions()
+    assert cuts[-1] == {"n_regions": top} and widget.count_box.value() == top
+    assert np.array_equal(widget.labels_layer.data,
+                          expected.hierarchy.segment(**_count_cut(expected, top)))
+    assert not repaints
+
+
 def _count_cut(result, k):
     return {"n_regions": k, "measure": result.measure,
             "min_component": result.cut["min_component"]}
@@ -201,7 +280,7 @@ def test_output_button_writes_the_clis_set(make_napari_viewer, qtbot, rotated_um
     from volseg.cli import main
 
     viewer = make_napari_viewer()
-    viewer.open(str(rotated_um_nifti), plugin="volseg")
+    open_in(viewer, rotated_um_nifti)
     widget = _widget(viewer)
     _run(qtbot, widget, regions=10)
     widget.count_box.setValue(7)

@@ -420,14 +420,20 @@ class MorseHierarchy(SizedByArrays):
     def relabel(self, region, out=None):
         """Labels 1..k of every vertex from the region index of each maximum (the
         result of `region_of_maximum`), 0 outside the mask: what `segment` returns,
-        for a caller that needs the regions too. `out`: an int32 array of `shape` to
-        write them into (numpy cells only; a viewer's live cut reuses its buffer)."""
+        for a caller that needs the regions too. `out`: an integer array of `shape` to
+        write them into (numpy cells only; a viewer's live cut reuses its buffer, in the
+        smallest type that holds its largest label)."""
         lazy = type(self.cells).__module__.startswith("dask.")
-        if out is not None and (lazy or out.shape != self.cells.shape or out.dtype != region.dtype
-                                or not out.flags.c_contiguous):
-            raise ValueError(f"`out` must be a C-contiguous {region.dtype} array of the cells' "
-                             f"shape {self.cells.shape}, for cells in memory")
         table = region_table(region, self.mask is not None)
+        if out is not None:
+            if lazy or out.shape != self.cells.shape or out.dtype.kind not in "iu" \
+                    or not out.flags.c_contiguous:
+                raise ValueError(f"`out` must be a C-contiguous integer array of the cells' "
+                                 f"shape {self.cells.shape}, for cells in memory")
+            if int(table.max(initial=0)) > np.iinfo(out.dtype).max:
+                raise ValueError(f"`out` ({out.dtype}) cannot hold label "
+                                 f"{int(table.max())}")
+            table = table.astype(out.dtype, copy=False)
         if not lazy:
             out = np.empty(self.cells.shape, table.dtype) if out is None else out
             cells = np.ascontiguousarray(self.cells)

@@ -47,12 +47,19 @@ class Options:
                 "measure": self.measure, "n_regions": self.n_regions, "field": self.field}
 
 
+def labels_dtype(max_label: int) -> np.dtype:
+    """The smallest unsigned type that holds labels 0..`max_label`."""
+    return np.dtype(np.min_scalar_type(max(int(max_label), 1)))
+
+
 class LiveSegmentation:
-    """One layer's segmentation (`run`) and its current cut (`cut`, `result`)."""
+    """One layer's segmentation (`run`) and its current cut (`cut`, `result`; a cut in
+    another thread: `prepare` there, `adopt` here)."""
 
     def __init__(self, source: LayerVolume, options: Options = Options()):
         self.source, self.options = source, options
         self.result: Segmentation | None = None
+        self._spare = None           # the labels buffer `prepare` writes into
         self._work: Path | None = None
         self._curve = None
 
@@ -70,10 +77,17 @@ class LiveSegmentation:
                 progress(message)
 
         volume = self.volume
+        self._curve = self._spare = None
         if _validate.is_lazy(volume.data):
             self.result = self._blockwise(volume, say)
         else:
-            self.result = segment_volume(volume, **self.options.keywords(), progress=say)
+            result = segment_volume(volume, **self.options.keywords(), progress=say)
+            # The layer's labels in the smallest type that holds every cut's labels (a
+            # quarter of int32's texture at most 255 regions); the cuts write into them.
+            self.result = result
+            buffer = np.empty(result.labels.shape, labels_dtype(self.max_regions()))
+            buffer[...] = result.labels
+            self.result = dataclasses.replace(result, labels=buffer)
         return self.result
 
     def _blockwise(self, volume, say) -> Segmentation:
@@ -96,10 +110,8 @@ class LiveSegmentation:
 
     def cut(self, n_regions: int | None = None, threshold: float | None = None):
         """Cut again into `n_regions`, or at `threshold` of the measure; returns the
-        labels as the layer shows them. In memory, every cut is written into the first
-        cut's array (no 4 bytes per voxel allocated per slider step): the layer's data
-        stays the same object, and `snapshot` gives a copy that later cuts leave alone."""
-        return self._recut(n_regions, threshold=threshold, measure=self.result.measure)
+        labels as the layer shows them (`prepare`, then `adopt`)."""
+        return self.adopt(self.prepare(n_regions, threshold=threshold))
 
     def set_measure(self, measure: str | None):
         """Cut by another measure (docs/design.md section 12; None: the field's),
@@ -107,18 +119,40 @@ class LiveSegmentation:
         recomputed."""
         if measure is None:
             measure = get_field(self.options.field).measure
-        return self._recut(self.result.n_regions, measure=measure)
+        return self.adopt(self.prepare(self.result.n_regions, measure=measure))
 
-    def _recut(self, n_regions, **cut):
-        labels = self.result.labels
-        reuse = isinstance(labels, np.ndarray) and labels.dtype == np.int32
-        self.result = self.result.recut(n_regions, **cut, out=labels if reuse else None)
+    def prepare(self, n_regions: int | None = None, *, threshold: float | None = None,
+                measure: str | None = None) -> Segmentation:
+        """The cut (into `n_regions`, or at `threshold` of `measure`, default the
+        current cut's), the current one left as it is: what a worker thread computes
+        while the layer shows the current labels. In memory its labels are written
+        into a second buffer, the same for every cut (no allocation per slider step):
+        one `prepare` runs at a time, and `adopt` shows it."""
+        result = self.result
+        out = None
+        if isinstance(result.labels, np.ndarray):
+            if self._spare is None:
+                self._spare = np.empty_like(result.labels)
+            out = self._spare
+        return result.recut(n_regions, threshold=threshold, measure=measure or result.measure,
+                            out=out)
+
+    def adopt(self, result: Segmentation):
+        """Make `result` (from `prepare`) the current cut; returns its labels as layer
+        data. In memory they are copied into the array the layer shows (a refresh
+        redraws it; handing napari another array costs it twice as much)."""
+        shown = self.result.labels
+        if isinstance(shown, np.ndarray) and result.labels is self._spare:
+            np.copyto(shown, self._spare)
+            result = dataclasses.replace(result, labels=shown)
+        self.result = result
         return self.labels()
 
     def snapshot(self) -> Segmentation:
-        """The current cut with labels of its own (for a writer in another thread)."""
+        """The current cut with labels of its own (for a writer in another thread), as
+        int32 as ``volseg segment`` writes them."""
         labels = self.result.labels
-        return dataclasses.replace(self.result, labels=labels.copy()
+        return dataclasses.replace(self.result, labels=labels.astype(np.int32)
                                    if isinstance(labels, np.ndarray) else labels)
 
     def labels(self):

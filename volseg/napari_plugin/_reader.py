@@ -16,7 +16,7 @@ from ..io.readers import is_tiff_folder
 from ..outputs import BLOCKWISE_SUFFIXES, NGFF_SUFFIX, OUTPUT_SUFFIXES
 from ._layers import frame_kwargs, to_layer
 
-__all__ = ["napari_get_reader", "read", "demo_layers"]
+__all__ = ["napari_get_reader", "read", "open_in", "demo_layers"]
 
 _SUMMARY = OUTPUT_SUFFIXES["summary"]
 #: The name of the labels image inside volseg's OME-Zarr output.
@@ -54,6 +54,15 @@ def read(path) -> list[tuple]:
         return [_result_layer(to_layer(volume.data), volume.name, "labels",
                               frame_kwargs(volume.frame))]
     return [_input_layer(volume)]
+
+
+def open_in(viewer, path) -> list:
+    """Open `path` in `viewer` with volseg's reader, whatever its name (the reader's
+    patterns claim only what no other napari reader opens: summaries, .raw, .dat,
+    .nrrd, .nhdr); returns the layers added."""
+    from napari.layers import Layer
+
+    return [viewer.add_layer(Layer.create(*layer)) for layer in read(path)]
 
 
 def demo_layers() -> list[tuple]:

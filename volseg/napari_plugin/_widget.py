@@ -4,13 +4,16 @@
   thread worker, with per-stage progress and a Cancel that stops it at the next stage;
 - the live cut: a region-count slider and a threshold slider (log scale) that
   relabel the labels layer from the hierarchy (`LiveSegmentation.cut`: no
-  recomputation), the curve of the measure beside them with the cut marked;
+  recomputation; a drag cuts at most once per `SLIDER_THROTTLE_MS`, and always at
+  the position it stops, each cut in a thread while the layer shows the last one),
+  the curve of the measure beside them with the cut marked;
 - a click on a region shows its size, its maximum and its persistence;
 - "Write output set" writes the current cut as ``volseg segment`` would.
 """
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +23,7 @@ from napari.layers import Image
 from napari.qt.threading import create_worker
 from qtpy.QtCore import QObject, Qt, Signal
 from qtpy.QtWidgets import (
+    QApplication,
     QCheckBox,
     QComboBox,
     QDoubleSpinBox,
@@ -36,6 +40,7 @@ from qtpy.QtWidgets import (
     QVBoxLayout,
     QWidget,
 )
+from superqt.utils import qthrottled
 
 from ..curvature import OPERATORS
 from ..fields import FIELDS
@@ -53,6 +58,10 @@ STAGES = ("curvature", "morse", "cut", "labels")
 #: Positions of the sliders: log scales of the region count (1 to every maximum) and
 #: of the threshold (the smallest to the largest extinction).
 SLIDER_STEPS = 1000
+#: A dragged slider cuts at most once per this many milliseconds (the first position
+#: at once, the last when the drag pauses): a drag over 40 positions in a second or
+#: two makes about 10 cuts, not 40, and the viewer keeps up.
+SLIDER_THROTTLE_MS = 100
 
 
 def _guarded(function, *args, **kwargs) -> tuple:
@@ -82,6 +91,8 @@ class SegmentWidget(QWidget):
         self.labels_layer = None
         self.curvature_layer = None
         self.worker = None
+        self._cutting = None         # the worker of the cut being computed, if any
+        self._pending = None         # the latest cut asked while one was computed
         self._cancel = False
         self._bridge = _Bridge()
         self._bridge.said.connect(self._progress)
@@ -158,14 +169,18 @@ class SegmentWidget(QWidget):
         # count in the box beside it.
         self.count_slider = QSlider(Qt.Orientation.Horizontal)
         self.count_slider.setRange(0, SLIDER_STEPS)
-        self.count_slider.valueChanged.connect(self._count_moved)
+        self._count_throttled = qthrottled(self._count_moved, timeout=SLIDER_THROTTLE_MS,
+                                           parent=self)
+        self.count_slider.valueChanged.connect(self._count_throttled)
         self.count_box = QSpinBox()
         self.count_box.setRange(1, 1)
         self.count_box.valueChanged.connect(self._count_typed)
         self.count_label = QLabel("")
         self.threshold_slider = QSlider(Qt.Orientation.Horizontal)
         self.threshold_slider.setRange(0, SLIDER_STEPS)
-        self.threshold_slider.valueChanged.connect(self._threshold_moved)
+        self._threshold_throttled = qthrottled(self._threshold_moved,
+                                               timeout=SLIDER_THROTTLE_MS, parent=self)
+        self.threshold_slider.valueChanged.connect(self._threshold_throttled)
         self.threshold_label = QLabel("")
         counts = QHBoxLayout()
         counts.addWidget(self.count_slider)
@@ -174,7 +189,9 @@ class SegmentWidget(QWidget):
         cut_layout.addRow("", self.count_label)
         cut_layout.addRow("threshold", self.threshold_slider)
         cut_layout.addRow("", self.threshold_label)
-        self.figure = Figure(figsize=(3.2, 2.2), tight_layout=True)
+        # Fixed margins: no layout pass on any draw.
+        self.figure = Figure(figsize=(3.2, 2.2))
+        self.figure.subplots_adjust(left=0.2, right=0.97, bottom=0.22, top=0.95)
         self.canvas = FigureCanvasQTAgg(self.figure)
         self.canvas.setMinimumHeight(180)
         self.canvas.mpl_connect("draw_event", self._captured)
@@ -232,6 +249,7 @@ class SegmentWidget(QWidget):
         except ValueError as err:
             self.status.setText(str(err))
             return
+        self.wait_for_cut()
         if self.live is not None:
             self.live.close()
         self.live = LiveSegmentation(source, self.options())
@@ -301,12 +319,50 @@ class SegmentWidget(QWidget):
     # The live cut ------------------------------------------------------------------
 
     def set_regions(self, n_regions: int):
-        """Cut into `n_regions` (what moving the region slider does)."""
+        """Cut into `n_regions` now (what typing the count does; the slider's cuts run
+        in a thread)."""
+        self.wait_for_cut()
         self._show_labels(self.live.cut(n_regions=int(n_regions)))
 
     def set_threshold(self, threshold: float):
-        """Cut at `threshold` of the measure (what moving the threshold slider does)."""
+        """Cut at `threshold` of the measure now."""
+        self.wait_for_cut()
         self._show_labels(self.live.cut(threshold=float(threshold)))
+
+    def wait_for_cut(self):
+        """Return once the cut computed in a thread (and any asked meanwhile) is shown:
+        a cut asked after it is the latest."""
+        while self._cutting is not None:
+            QApplication.processEvents()
+            time.sleep(0.001)
+
+    def _queue_cut(self, **cut):
+        """Cut in a thread (`LiveSegmentation.prepare`): the layer keeps showing the
+        last cut, and the main thread only shows the new one. One cut at a time; asked
+        while one runs, only the latest is cut next."""
+        self._pending = cut
+        if self._cutting is None:
+            self._next_cut()
+
+    def _next_cut(self):
+        cut, self._pending = self._pending, None
+        live = self.live
+        if cut is None or live is None or live.result is None:
+            return
+        worker = create_worker(_guarded, live.prepare, **cut)
+        worker.returned.connect(lambda outcome: self._cut_ready(live, outcome))
+        self._cutting = worker
+        worker.start()
+
+    def _cut_ready(self, live, outcome):
+        result, err = outcome
+        self._cutting = None
+        if live is self.live and self.labels_layer is not None:
+            if err is not None:
+                self.status.setText(str(err))
+            else:
+                self._show_labels(live.adopt(result))
+        self._next_cut()
 
     def _show_labels(self, labels):
         layer = self.labels_layer
@@ -321,13 +377,14 @@ class SegmentWidget(QWidget):
         """After a run, another measure recuts at once (same count, its own curve)."""
         if self.live is not None and self.live.result is not None \
                 and self.labels_layer is not None:
+            self.wait_for_cut()
             labels = self.live.set_measure(None if measure == FIELD_DEFAULT else measure)
             self._draw_curve()
             self._show_labels(labels)
 
     def _count_moved(self, position: int):
         if self.live is not None and self.live.result is not None:
-            self.set_regions(self._count_at(position))
+            self._queue_cut(n_regions=self._count_at(position))
 
     def _count_typed(self, value: int):
         if self.live is not None and self.live.result is not None:
@@ -344,7 +401,7 @@ class SegmentWidget(QWidget):
 
     def _threshold_moved(self, position: int):
         if self.live is not None and self.live.result is not None:
-            self.set_threshold(self._threshold_at(position))
+            self._queue_cut(threshold=self._threshold_at(position))
 
     def _bounds(self) -> tuple:
         thresholds, _ = self.live.curve()
@@ -408,7 +465,10 @@ class SegmentWidget(QWidget):
         self.canvas.restore_region(self._background)
         self.axes.draw_artist(line)
         self.axes.draw_artist(dot)
-        self.canvas.blit(self.axes.bbox)
+        # Painted with the next paint of the window (matplotlib's `blit` repaints at
+        # once, synchronously: 50-60 ms of the main thread per step, in napari's
+        # window).
+        self.canvas.update()
 
     def _clicked(self, layer, event):
         value = layer.get_value(event.position, view_direction=event.view_direction,
@@ -440,6 +500,7 @@ class SegmentWidget(QWidget):
         if not folder:
             self.status.setText("choose an output folder first")
             return
+        self.wait_for_cut()
         self.write_button.setEnabled(False)
         self.run_button.setEnabled(False)      # one worker at a time
         # The cut as it is now: the sliders may move while the set is written.
@@ -464,6 +525,7 @@ class SegmentWidget(QWidget):
             self.status.setText(f"wrote {names}")
 
     def closeEvent(self, event):      # noqa: N802 (Qt's name)
+        self.wait_for_cut()
         if self.live is not None:
             self.live.close()
         super().closeEvent(event)
