@@ -108,8 +108,9 @@ def _add_segment(sub):
                      "quantization steps are voxel-sized curvature noise), 0 for floats. "
                      "Larger: fewer, rounder regions; features under about 2 SIGMA vanish")
     seg.add_argument("--vti", action=argparse.BooleanOptionalAction, default=None,
-                     help="also write <name>_volumes.vti, the input, curvature and labels "
-                     "for ParaView (default: up to 256^3 voxels)")
+                     help="also write <name>_volumes.vti, the input, field and labels "
+                     "for ParaView (a .vts grid with every voxel's position for an oblique "
+                     "or flipped scan; default: up to 256^3 voxels)")
     seg.add_argument("--plot-persistence", action="store_true",
                      help="also write <name>_persistence.png, the persistence curve alone")
     seg.add_argument("--chunks", type=int, metavar="N",

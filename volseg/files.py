@@ -171,7 +171,8 @@ def output_sets(volumes, out_dir, *, force=False, wait=False, persistence_plot=F
     name = field_entry(field).name
     fields = (*FIELDS, GIVEN)
     return [OutputSet(out_dir, v.name, output_names(v.name, persistence_plot, _is_lazy(v),
-                                                    int(np.prod(v.shape)), paraview, name),
+                                                    int(np.prod(v.shape)), paraview, name,
+                                                    v.frame.axis_aligned),
                       force=force, wait=wait, owns=all_output_names(v.name, fields))
             for v in volumes]
 

@@ -397,3 +397,36 @@ def test_vti_streams_lazy_arrays_a_slab_at_a_time(tmp_path, monkeypatch):
     with pytest.raises(ValueError, match="cannot hold complex128"):
         write_vti(tmp_path / "b.vti", {"a": data.astype(complex)}, Frame.from_spacing((1, 1, 1)))
     assert not (tmp_path / "b.vti").exists()
+
+
+def test_vts_writes_every_points_world_position_slab_by_slab(tmp_path, monkeypatch):
+    """`write_vts` (an oblique scan's ParaView file): the points are the frame's world
+    positions, x fastest, whatever the slab size; float32 when that is within 1e-3 of
+    the smallest voxel size, float64 far from the origin; the unit as field data."""
+    vtk = pytest.importorskip("vtk")
+    from vtk.util.numpy_support import vtk_to_numpy
+
+    from volseg.io import Frame, vtk_image, write_vts
+
+    monkeypatch.setattr(vtk_image, "SLAB_BYTES", 1)
+    data = np.random.default_rng(4).normal(size=(6, 5, 4)).astype(np.float32)
+    angle = np.deg2rad(25)
+    affine = np.eye(4)
+    affine[:3, :3] = np.array([[np.cos(angle), -np.sin(angle), 0],
+                               [np.sin(angle), np.cos(angle), 0], [0, 0, -1]]) @ np.diag(
+        [0.5, 0.25, 2.0])
+    for origin, kind in (([3.0, -2.0, 1.0], np.float32), ([1e6, 0.0, 0.0], np.float64)):
+        affine[:3, 3] = origin
+        path = write_vts(tmp_path / "a.vts", {"v": data}, Frame(affine, unit="micrometer"))
+        reader = vtk.vtkXMLStructuredGridReader()
+        reader.SetFileName(str(path))
+        reader.Update()
+        grid = reader.GetOutput()
+        points = vtk_to_numpy(grid.GetPoints().GetData())
+        assert points.dtype == kind
+        i, j, k = np.meshgrid(*map(np.arange, data.shape), indexing="ij")
+        index = np.stack([i, j, k, np.ones_like(i)], -1).transpose(2, 1, 0, 3).reshape(-1, 4)
+        np.testing.assert_allclose(points, (index @ affine.T)[:, :3], atol=1e-4)
+        back = vtk_to_numpy(grid.GetPointData().GetArray("v")).reshape(4, 5, 6)
+        np.testing.assert_array_equal(back.transpose(2, 1, 0), data)
+        assert grid.GetFieldData().GetAbstractArray("unit").GetValue(0) == "micrometer"

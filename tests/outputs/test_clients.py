@@ -68,26 +68,67 @@ def test_nifti_outputs_in_simpleitk(run):
                                   np.asarray(nibabel.load(run / "cell_labels.nii.gz").dataobj))
 
 
-def _vti(path):
+def _vtk_file(path):
+    """(dataset, name -> [x, y, z] array) of a ParaView file, read by VTK's own XML
+    reader (ParaView's): an image (.vti) or a structured grid (.vts)."""
     vtk = pytest.importorskip("vtk")
     from vtk.util.numpy_support import vtk_to_numpy
 
-    reader = vtk.vtkXMLImageDataReader()
+    reader = (vtk.vtkXMLStructuredGridReader() if path.suffix == ".vts"
+              else vtk.vtkXMLImageDataReader())
     reader.SetFileName(str(path))
     reader.Update()
-    image = reader.GetOutput()
-    shape = image.GetDimensions()
+    data = reader.GetOutput()
+    extent = data.GetExtent()
+    shape = tuple(extent[2 * a + 1] - extent[2 * a] + 1 for a in range(3))
     arrays = {}
-    for i in range(image.GetPointData().GetNumberOfArrays()):
-        array = image.GetPointData().GetArray(i)
+    for i in range(data.GetPointData().GetNumberOfArrays()):
+        array = data.GetPointData().GetArray(i)
         arrays[array.GetName()] = vtk_to_numpy(array).reshape(shape[::-1]).transpose(2, 1, 0)
-    return image, arrays
+    return data, arrays
 
 
-def test_paraview_image_opens_aligned_in_vtks_reader(run):
-    """VTK's XML image reader (ParaView's) sees the input, curvature and labels, on the
-    input's grid: index -> world equals the NIfTI affine (rotation included)."""
-    image, arrays = _vti(run / "cell_volumes.vti")
+def _contour_bounds(data, name, level):
+    """(xmin, xmax, ymin, ymax, zmin, zmax) of VTK's `vtkContourFilter` isosurface of
+    array `name` at `level`: the filter ParaView's Contour runs."""
+    import vtk
+
+    data.GetPointData().SetActiveScalars(name)
+    contour = vtk.vtkContourFilter()
+    contour.SetInputData(data)
+    contour.SetValue(0, level)
+    contour.Update()
+    return np.array(contour.GetOutput().GetBounds())
+
+
+def _world_isosurface_bounds(values, affine, level):
+    """The same isosurface computed in voxel indices (an unrotated image), its points
+    taken to the world by the NIfTI's affine (linear: the isosurface's points map
+    exactly): the bounds a correctly placed file must give."""
+    import vtk
+    from vtk.util.numpy_support import numpy_to_vtk, vtk_to_numpy
+
+    image = vtk.vtkImageData()
+    image.SetDimensions(*values.shape)
+    image.GetPointData().SetScalars(numpy_to_vtk(values.transpose(2, 1, 0).ravel().astype(
+        np.float64)))
+    contour = vtk.vtkContourFilter()
+    contour.SetInputData(image)
+    contour.SetValue(0, level)
+    contour.Update()
+    points = vtk_to_numpy(contour.GetOutput().GetPoints().GetData())
+    world = points @ affine[:3, :3].T + affine[:3, 3]
+    return np.ravel(np.column_stack([world.min(0), world.max(0)]))
+
+
+def test_paraview_file_of_an_oblique_scan_places_contour_where_the_scan_is(run):
+    """An oblique, flipped, micrometre scan's ParaView file is a structured grid with
+    every voxel's world position (issue 58): VTK's Contour (which ignores an image's
+    Direction) draws the isosurface where the NIfTI puts it; the arrays are the NIfTI
+    outputs'; the unit is the field data's."""
+    assert not (run / "cell_volumes.vti").exists()
+    grid, arrays = _vtk_file(run / "cell_volumes.vts")
+    assert grid.GetClassName() == "vtkStructuredGrid"
     assert sorted(arrays) == ["curvature", "labels", "values"]
     np.testing.assert_array_equal(arrays["values"], _blobs())
     np.testing.assert_array_equal(arrays["labels"],
@@ -95,18 +136,46 @@ def test_paraview_image_opens_aligned_in_vtks_reader(run):
     np.testing.assert_array_equal(
         arrays["curvature"], np.asarray(nibabel.load(run / "cell_curvature.nii.gz").dataobj))
     for index in [(0, 0, 0), (19, 0, 0), (3, 17, 11), (19, 17, 15)]:
-        world = [0.0] * 3
-        image.TransformIndexToPhysicalPoint(*index, world)
-        np.testing.assert_allclose(world, (ROTATED_UM @ [*index, 1])[:3], atol=1e-12)
+        flat = index[0] + 20 * (index[1] + 18 * index[2])         # x fastest
+        np.testing.assert_allclose(grid.GetPoint(flat), (ROTATED_UM @ [*index, 1])[:3],
+                                   atol=1e-5)
+    affine = nibabel.load(run / "cell_labels.nii.gz").affine
+    for name, level in (("values", 100.0), ("labels", 1.5)):
+        np.testing.assert_allclose(_contour_bounds(grid, name, level),
+                                   _world_isosurface_bounds(arrays[name], affine, level),
+                                   atol=1e-3)
+    assert grid.GetFieldData().GetAbstractArray("unit").GetValue(0) == "micrometer"
 
 
-def test_blockwise_writes_the_same_paraview_image(run, tmp_path):
+def test_paraview_image_of_an_axis_aligned_scan(tmp_path):
+    """An axis-aligned scan's ParaView file stays an image (.vti: 9 bytes per voxel,
+    not 21-33), placed by origin and spacing, Contour included."""
+    affine = np.array([[0.5, 0, 0, 3.0], [0, 0.4, 0, -2.0], [0, 0, 0.8, 1.0], [0, 0, 0, 1]])
+    image = nibabel.Nifti1Image(_blobs(), affine)
+    image.header.set_xyzt_units("mm")
+    nibabel.save(image, tmp_path / "cell.nii.gz")
+    assert main(["segment", str(tmp_path / "cell.nii.gz"), "-o", str(tmp_path / "out"), "-q",
+                 "--regions", "3"]) == 0
+    assert not (tmp_path / "out" / "cell_volumes.vts").exists()
+    data, arrays = _vtk_file(tmp_path / "out" / "cell_volumes.vti")
+    assert data.GetClassName() == "vtkImageData"
+    np.testing.assert_allclose(_contour_bounds(data, "values", 100.0),
+                               _world_isosurface_bounds(arrays["values"], affine, 100.0),
+                               atol=1e-3)
+    assert data.GetFieldData().GetAbstractArray("unit").GetValue(0) == "millimeter"
+
+
+def test_blockwise_writes_the_same_paraview_file(run, tmp_path):
     assert main(["segment", str(run.parent / "cell.nii.gz"), "-o", str(tmp_path), "-q",
                  "--regions", "3", "--chunks", "7"]) == 0
-    _, blockwise = _vti(tmp_path / "cell_volumes.vti")
-    _, memory = _vti(run / "cell_volumes.vti")
+    blockwise_grid, blockwise = _vtk_file(tmp_path / "cell_volumes.vts")
+    memory_grid, memory = _vtk_file(run / "cell_volumes.vts")
     for name in memory:
         np.testing.assert_array_equal(blockwise[name], memory[name])
+    from vtk.util.numpy_support import vtk_to_numpy
+
+    np.testing.assert_array_equal(vtk_to_numpy(blockwise_grid.GetPoints().GetData()),
+                                  vtk_to_numpy(memory_grid.GetPoints().GetData()))
 
 
 def _ngff_nodes(path):

@@ -12,6 +12,7 @@ from volseg.io import Frame, write_zarr
 from volseg.outputs import (
     BLOCKWISE_NIFTI_VOXELS,
     PARAVIEW_VOXELS,
+    all_output_names,
     output_names,
     result_title,
     summary,
@@ -26,6 +27,8 @@ def test_output_names_of_each_path():
     assert "paraview" not in output_names("s", voxels=PARAVIEW_VOXELS + 1)
     assert "paraview" not in output_names("s", paraview=False)
     assert "paraview" in output_names("s", voxels=PARAVIEW_VOXELS + 1, paraview=True)
+    assert output_names("s", axis_aligned=False)["paraview"] == "s_volumes.vts"
+    assert {"s_volumes.vti", "s_volumes.vts"} <= all_output_names("s")
     big = output_names("s", blockwise=True, voxels=BLOCKWISE_NIFTI_VOXELS + 1)
     assert big["labels"] == "s_labels.zarr" and big["curvature"] == "s_curvature.zarr"
     assert "labels_nifti" not in big

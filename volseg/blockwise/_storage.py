@@ -61,10 +61,12 @@ IN_MEMORY_BYTES_PER_VOXEL = 40
 # uncompressed): the work folder's curvature 8, path ends 8 and cells 4 at the end of
 # the cells pass, plus 8 of smoothed values with smoothing; the outputs' compressed
 # curvature (5.1 measured at 512^3, at most 8) and labels (at most 2) come on top, and
-# the ParaView image's uncompressed input (at most 8), curvature 4 and labels 4.
+# the ParaView image's uncompressed input (at most 8), curvature 4 and labels 4, and an
+# oblique input's grid points (at most 24, float64).
 # Less free disk than the work folder needs refuses the run before it starts; less
 # than both, a warning.
-DISK_BYTES_PER_VOXEL = {"work": 20, "smoothed": 8, "outputs": 10, "paraview": 16}
+DISK_BYTES_PER_VOXEL = {"work": 20, "smoothed": 8, "outputs": 10, "paraview": 16,
+                        "paraview_points": 24}
 #: Progress titles of the stages stored whole in the work folder.
 _STORED_TITLES = {"smoothed": "smoothing", "cells": "Morse: cells per block"}
 
@@ -96,7 +98,8 @@ class BlockwiseStorage(Storage):
         self.request = request = request or self.request
         data = self.data
         _check_disk(self.folder, self.work_folder, data.size, request.smooth_sigma, self.say,
-                    paraview="paraview" in self.paths)
+                    paraview="paraview" in self.paths,
+                    points=str(self.paths.get("paraview", "")).endswith(".vts"))
         self.work = WorkFolder(self.work_folder, {
             "volseg": __version__, "input": self.checksum, "shape": list(data.shape),
             "chunks": [list(c) for c in data.chunks], "spacing": list(request.spacing),
@@ -171,14 +174,16 @@ def _field_key(entry) -> str:
     return f"{GIVEN}:{tokenize(entry.make(None, None, None, None, None))}"
 
 
-def _check_disk(folder, work_folder, voxels: int, smooth: float, say, paraview=False):
+def _check_disk(folder, work_folder, voxels: int, smooth: float, say, paraview=False,
+                points=False):
     """Refuse a run whose work folder cannot fit on `folder`'s disk (an OutputError
     naming both sizes, before anything is written); warn when the outputs may not fit
     beside it. A work folder left by an earlier run counts as free: it is either
     reused or emptied."""
     per_voxel = DISK_BYTES_PER_VOXEL
     least = voxels * (per_voxel["work"] + (per_voxel["smoothed"] if smooth else 0))
-    most = least + voxels * (per_voxel["outputs"] + (per_voxel["paraview"] if paraview else 0))
+    most = least + voxels * (per_voxel["outputs"] + (per_voxel["paraview"] if paraview else 0)
+                             + (per_voxel["paraview_points"] if points else 0))
     free = shutil.disk_usage(folder).free + sum(
         os.path.getsize(os.path.join(top, name))
         for top, _, names in os.walk(work_folder) for name in names)

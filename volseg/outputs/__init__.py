@@ -14,6 +14,7 @@ from ._summary import (
     LISTED_PERSISTENCES,
     NGFF_SUFFIX,
     OUTPUT_SUFFIXES,
+    PARAVIEW_GRID_SUFFIX,
     PARAVIEW_SUFFIX,
     PARAVIEW_VOXELS,
     all_output_names,
@@ -29,7 +30,7 @@ from ._summary import (
 from ._write import write_result_files, write_segmentation
 
 __all__ = ["OUTPUT_SUFFIXES", "BLOCKWISE_SUFFIXES", "BLOCKWISE_NIFTI_VOXELS", "PARAVIEW_SUFFIX",
-           "NGFF_SUFFIX", "PARAVIEW_VOXELS",
+           "PARAVIEW_GRID_SUFFIX", "NGFF_SUFFIX", "PARAVIEW_VOXELS",
            "LISTED_PERSISTENCES", "output_names", "all_output_names", "files_sha256",
            "input_files", "summary",
            "result_summary", "input_summary", "result_title", "degenerate_cut_warning",

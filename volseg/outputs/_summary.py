@@ -18,7 +18,8 @@ from ..io import Frame
 from ..morse import get_measure
 from ..morse.cuts import LISTED_PERSISTENCES
 
-__all__ = ["OUTPUT_SUFFIXES", "BLOCKWISE_NIFTI_VOXELS", "PARAVIEW_SUFFIX", "PARAVIEW_VOXELS",
+__all__ = ["OUTPUT_SUFFIXES", "BLOCKWISE_NIFTI_VOXELS", "PARAVIEW_SUFFIX",
+           "PARAVIEW_GRID_SUFFIX", "PARAVIEW_VOXELS",
            "NGFF_SUFFIX", "output_names", "all_output_names", "files_sha256", "summary",
            "result_summary", "input_summary", "result_title", "degenerate_cut_warning"]
 
@@ -39,6 +40,9 @@ BLOCKWISE_NIFTI_VOXELS = 256**3
 NGFF_SUFFIX = "_segmentation.ome.zarr"
 #: The input, curvature and labels in one VTK image for ParaView (`volseg.io.write_vti`).
 PARAVIEW_SUFFIX = "_volumes.vti"
+#: The same as a structured grid with every point's world position, for an oblique or
+#: flipped input (`volseg.io.write_vts`): ParaView's Contour ignores an image's Direction.
+PARAVIEW_GRID_SUFFIX = "_volumes.vts"
 #: Up to this many voxels every run writes the ParaView image (about 9 bytes per voxel
 #: for 8-bit input: 150 MB at 256^3); above it only on request (``--vti``).
 PARAVIEW_VOXELS = 256**3
@@ -46,18 +50,19 @@ PARAVIEW_VOXELS = 256**3
 
 def output_names(stem: str, persistence_plot: bool = False, blockwise: bool = False,
                  voxels: int | None = None, paraview: bool | None = None,
-                 field: str = "curvature") -> dict:
+                 field: str = "curvature", axis_aligned: bool = True) -> dict:
     """Kind -> file name of the outputs of `stem` (with ``<stem>_persistence.png``
     when `persistence_plot`; labels and curvature as ``.zarr`` when `blockwise`, and
     also as NIfTI when the volume's `voxels` are given and at most
     `BLOCKWISE_NIFTI_VOXELS`; the OME-Zarr image ``<stem>_segmentation.ome.zarr``; the ParaView
     image ``<stem>_volumes.vti`` when `paraview`, or by default when `voxels` are
-    unknown or at most `PARAVIEW_VOXELS`)."""
+    unknown or at most `PARAVIEW_VOXELS`; ``<stem>_volumes.vts`` instead when the
+    input's frame is not `axis_aligned`)."""
     names = {kind: stem + suffix.replace("curvature", field)
              for kind, suffix in OUTPUT_SUFFIXES.items()}
     names["ngff"] = stem + NGFF_SUFFIX
     if paraview or (paraview is None and (voxels is None or voxels <= PARAVIEW_VOXELS)):
-        names["paraview"] = stem + PARAVIEW_SUFFIX
+        names["paraview"] = stem + (PARAVIEW_SUFFIX if axis_aligned else PARAVIEW_GRID_SUFFIX)
     if blockwise:
         if voxels is not None and voxels <= BLOCKWISE_NIFTI_VOXELS:
             names.update({f"{kind}_nifti": stem + OUTPUT_SUFFIXES[kind].replace("curvature", field)
@@ -78,7 +83,7 @@ def all_output_names(stem: str, fields=("curvature",)) -> set:
         names |= set(output_names(stem, persistence_plot=True, blockwise=True, voxels=1,
                                   paraview=True, field=field).values())
         names |= set(output_names(stem, persistence_plot=True, paraview=True,
-                                  field=field).values())
+                                  field=field, axis_aligned=False).values())
     return names
 
 
@@ -170,7 +175,8 @@ def input_summary(name, source=None, checksum=None, files=()) -> dict:
 NGFF_NOT_PLACED = ("axis-aligned: the input's frame rotates or flips its axes, which "
                    "NGFF 0.5 (scale and translation only) cannot hold; the OME-Zarr "
                    "image's voxel (i, j, k) sits at origin + spacing x (i, j, k), not where "
-                   "the scan is. The NIfTI outputs and the .vti carry the full affine")
+                   "the scan is. The NIfTI outputs carry the full affine, and the ParaView "
+                   "file (.vts) every voxel's world position")
 
 
 def ngff_placement(frame) -> str:

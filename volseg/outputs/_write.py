@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import _json
-from ..io import Frame, OutputSet, write_ngff, write_volume, write_vti, write_zarr
+from ..io import Frame, OutputSet, write_ngff, write_volume, write_vti, write_vts, write_zarr
 
 __all__ = ["write_result_files", "write_segmentation"]
 
@@ -53,7 +53,8 @@ def write_result_files(paths: dict, result, values, info: dict, *, frame: Frame 
             jobs.append(pool.submit(write_ngff, paths["ngff"], arrays["labels"],
                                     result.curvature, frame, field))  # means in float64
         if "paraview" in paths:         # the arrays named for what they hold
-            jobs.append(pool.submit(write_vti, paths["paraview"],
+            write_paraview = write_vts if str(paths["paraview"]).endswith(".vts") else write_vti
+            jobs.append(pool.submit(write_paraview, paths["paraview"],
                                     {"labels": arrays["labels"], field: arrays["curvature"],
                                      "values": values}, frame))
         if "persistence" in paths:
