@@ -310,3 +310,35 @@ def test_help_names_every_input_format_and_operator(capsys):
     assert "OME-Zarr" in text and "TIFF" in text and ".raw" in text
     for operator in REGISTRY.values():
         assert operator.label in text
+
+
+def test_compare_refuses_labels_on_different_grids_unless_asked(tmp_path, capsys):
+    """Issue 57 (#13): labels of the same shape but other voxel sizes, origin or axes
+    were compared voxel by voxel without a word. They are refused naming both grids;
+    --any-grid compares them, with a warning; a file without geometry (.npy) is no
+    disagreement."""
+    import nibabel
+
+    a = np.zeros((6, 5, 4), np.int16)
+    a[3:] = 1
+    nibabel.save(nibabel.Nifti1Image(a, np.diag([1.0, 1.0, 2.0, 1.0])), tmp_path / "a.nii.gz")
+    shifted = np.diag([1.0, 1.0, 2.0, 1.0])
+    shifted[:3, 3] = [5, 0, 0]
+    nibabel.save(nibabel.Nifti1Image(a, shifted), tmp_path / "b.nii.gz")
+    nibabel.save(nibabel.Nifti1Image(a, np.diag([1.0, 1.0, 2.0, 1.0])), tmp_path / "c.nii.gz")
+    np.save(tmp_path / "d.npy", a)
+    pair = [str(tmp_path / "a.nii.gz"), str(tmp_path / "b.nii.gz")]
+    assert main(["compare", *pair]) == 2
+    err = capsys.readouterr().err
+    assert "places its voxels elsewhere" in err and "origin (5, 0, 0)" in err
+    assert "--any-grid" in err and err.count("\n") == 1
+    assert main(["compare", *pair, "--any-grid", "--json"]) == 0
+    captured = capsys.readouterr()
+    assert json.loads(captured.out)["hamming_similarity"] == 1.0
+    assert "volseg: warning:" in captured.err and "--any-grid" in captured.err
+    for other in ("c.nii.gz", "d.npy"):
+        assert main(["compare", str(tmp_path / "a.nii.gz"), str(tmp_path / other)]) == 0
+        assert "warning" not in capsys.readouterr().err
+    assert main(["compare", str(tmp_path / "a.nii.gz"), str(tmp_path / "c.nii.gz"),
+                 "--mask", str(tmp_path / "b.nii.gz")]) == 2
+    assert "--mask" in capsys.readouterr().err

@@ -127,6 +127,24 @@ def test_read_series_from_one_4d_file_and_from_3d_steps(tmp_path):
         read_series(str(tmp_path / "nothing_*.npy"))
 
 
+def test_series_steps_must_share_type_and_grid(tmp_path):
+    """Issue 57 (#13): a float 0..1 step and a uint8 0..100 step were stacked as one
+    float64 series (one field on one scale); steps at other origins were accepted.
+    Both are refused naming the step."""
+    field = moving_blob(n=6, steps=2).astype(np.float32)
+    field = field / field.max()
+    np.save(tmp_path / "s_0.npy", field[..., 0])
+    np.save(tmp_path / "s_1.npy", np.round(field[..., 1] * 100).astype(np.uint8))
+    with pytest.raises(ValueError, match=r"s_1.npy: a time step of type uint8, but .*float32"):
+        read_series(str(tmp_path / "s_*.npy"))
+    for t, origin in enumerate((0.0, 3.0)):
+        affine = np.diag([0.5, 0.5, 0.5, 1.0])
+        affine[0, 3] = origin
+        nibabel.save(nibabel.Nifti1Image(field[..., t], affine), tmp_path / f"n_{t}.nii.gz")
+    with pytest.raises(ValueError, match=r"n_1.nii.gz: its voxels sit elsewhere"):
+        read_series(str(tmp_path / "n_*.nii.gz"))
+
+
 def test_cli_isosurface_writes_a_paraview_series(tmp_path, capsys):
     field = moving_blob(n=10, steps=4)
     np.save(tmp_path / "blob.npy", field)

@@ -248,6 +248,9 @@ def _add_others(sub):
                          help="score only the voxels where this volume is nonzero (a mask, or "
                          "a label volume whose 0 is background); 'a' or 'b': the foreground "
                          "(labels > 0) of that input")
+    compare.add_argument("--any-grid", action="store_true",
+                         help="compare voxel by voxel even when the files place their voxels "
+                         "differently (voxel sizes, origin, axes or unit); refused otherwise")
     compare.add_argument("--json", action="store_true")
 
 
@@ -481,18 +484,57 @@ def _integer_labels(data, path):
     return data.astype(np.int64)
 
 
+def _frame_text(frame) -> str:
+    spacing = ", ".join(f"{v:g}" for v in frame.spacing)
+    origin = ", ".join(f"{v:g}" for v in frame.affine[:3, 3])
+    return (f"voxel sizes ({spacing}) {frame.unit or 'no unit'}, origin ({origin})"
+            + ("" if frame.axis_aligned else ", rotated or flipped"))
+
+
+def _same_grid_or_say(first, other, name: str, any_grid: bool):
+    """Refuse labels (or a mask) whose voxels sit elsewhere than the first labels':
+    a voxel-by-voxel score of two grids compares different places. `any_grid` (a
+    user who knows) compares them anyway, saying so. A file that carries no geometry
+    (a .npy, a raw grid: unit-less voxels of 1 at the origin) and a unit one file does
+    not say are no disagreement."""
+    import warnings
+
+    from .errors import VolsegWarning
+
+    a, b = first.frame, other.frame
+    if any(f.unit is None and np.array_equal(f.affine, np.eye(4)) for f in (a, b)):
+        return
+    if a.unit is None or b.unit is None:
+        a, b = a.with_unit(None), b.with_unit(None)
+    if a.same_grid(b):
+        return
+    what = (f"{name} places its voxels elsewhere than the first labels ("
+            f"{_frame_text(other.frame)}, against {_frame_text(first.frame)})")
+    if not any_grid:
+        raise UsageError(f"{what}: resample one onto the other's grid, or pass --any-grid "
+                         "to compare them voxel by voxel as they are")
+    warnings.warn(f"{what}: compared voxel by voxel as they are (--any-grid)", VolsegWarning,
+                  stacklevel=2)
+
+
 def _cmd_compare(args):
     from . import metrics
     from .files import load_volume
 
-    a = _integer_labels(load_volume(args.labels_a).data, args.labels_a)
-    b = _integer_labels(load_volume(args.labels_b).data, args.labels_b)
+    volume_a, volume_b = load_volume(args.labels_a), load_volume(args.labels_b)
+    a = _integer_labels(volume_a.data, args.labels_a)
+    b = _integer_labels(volume_b.data, args.labels_b)
     if a.shape != b.shape:
         raise UsageError(f"{args.labels_a} is {a.shape} but {args.labels_b} is {b.shape}")
+    _same_grid_or_say(volume_a, volume_b, args.labels_b, args.any_grid)
     mask = None
     if args.mask:
         mask = {"a": a, "b": b}.get(args.mask)
-        mask = (load_volume(args.mask).data if mask is None else mask) != 0
+        if mask is None:
+            volume_mask = load_volume(args.mask)
+            _same_grid_or_say(volume_a, volume_mask, f"--mask {args.mask}", args.any_grid)
+            mask = volume_mask.data
+        mask = np.asarray(mask) != 0
         if mask.shape != a.shape:
             raise UsageError(f"--mask {args.mask} is {mask.shape}, the labels are {a.shape}")
     result = metrics.compare(a, b, mask=mask)

@@ -1,7 +1,7 @@
 """Time series of volumes: one 4-D file (x, y, z, t) or several 3-D files in time order.
 
 The readers are those of `read_volume` (bounded, every field checked); a series adds
-only that every step has the same shape and spacing.
+only that every step has the same shape, grid (spacing, origin, axes, unit) and type.
 """
 
 from __future__ import annotations
@@ -144,7 +144,7 @@ def read_series(inputs, *, allow_external_data: bool = False) -> Series:
     ------
     VolumeFileError
         A file `read_volume` refuses, a single file that is not 4-D, steps of
-        different shapes or spacings, fewer than 2 time steps.
+        different shapes, grids or types, fewer than 2 time steps.
     FileNotFoundError
         A missing file or a pattern that matches nothing.
     """
@@ -184,6 +184,15 @@ def read_series(inputs, *, allow_external_data: bool = False) -> Series:
         if not np.allclose(step.spacing, first.spacing):
             raise VolumeFileError(f"{path}: spacing {step.spacing} differs from {paths[0]}'s "
                                   f"{first.spacing}")
+        if not first.frame.same_grid(step.frame):
+            raise VolumeFileError(f"{path}: its voxels sit elsewhere than {paths[0]}'s "
+                                  "(origin, axes or unit differ); every step must share "
+                                  "one grid")
+        if step.dtype != first.dtype:
+            # Stacked, float 0..1 and uint8 0..255 steps would be one field on one scale.
+            raise VolumeFileError(f"{path}: a time step of type {step.dtype}, but {paths[0]} "
+                                  f"is {first.dtype}; every step must have the same type "
+                                  "(and scale): convert the steps to one first")
     data = np.stack([np.asarray(s.data) for s in steps], axis=-1)
     files = tuple(f for s in steps for f in s.files)
     return Series(data, tuple(first.spacing), first.name, files, first.frame)

@@ -94,6 +94,13 @@ class Frame:
         """The same frame with the world's length `unit`."""
         return Frame(self.affine, self.sform_code, self.qform_code, self.qform, unit)
 
+    def same_grid(self, other: Frame) -> bool:
+        """Whether `other` places every voxel where this frame does: equal affines
+        within a millionth of the largest voxel size, and the same unit."""
+        tolerance = 1e-6 * max(max(self.spacing), max(other.spacing))
+        return self.unit == other.unit and bool(
+            np.allclose(self.affine, other.affine, rtol=0, atol=tolerance))
+
     @property
     def axis_aligned(self) -> bool:
         """Whether voxel axis i runs along world axis i, forwards: no rotation, no flip
