@@ -1,6 +1,8 @@
 import json
 import os
 import stat
+import subprocess
+import sys
 
 import nibabel
 import numpy as np
@@ -219,36 +221,54 @@ def test_compare_takes_whole_float_labels_and_names_a_file_of_fractions(tmp_path
 
 
 def test_first_run_note_and_in_memory_stage_progress(tmp_path, capsys, monkeypatch):
-    """A kernel without a cache index means a compilation: one line says so before it;
-    in-memory runs say each stage and the seconds the one before took (not one line
-    then silence); -q says nothing."""
+    """The first run's note is said exactly when numba compiles (a cache miss), once,
+    and never when every kernel loads from the cache (it was said on every run: the
+    probe looked for a kernel the default cut never compiles); in-memory runs say
+    each stage and the seconds the one before took; -q says nothing."""
     import importlib
-    import sys
 
     from volseg import _jit_cache
 
     (tmp_path / "fresh_kernels.py").write_text(
-        "import numba\n@numba.njit(cache=True)\ndef twice(x):\n    return 2 * x\n")
+        "import numba\n@numba.njit(cache=True)\ndef twice(x):\n    return 2 * x\n"
+        "@numba.njit(cache=True)\ndef thrice(x):\n    return 3 * x\n")
     sys.path.insert(0, str(tmp_path))
+    said = []
     try:
         module = importlib.import_module("fresh_kernels")
-        assert _jit_cache.uncompiled([module.twice]) == ["fresh_kernels.twice"]
-        assert module.twice(3) == 6                       # compiled and cached now
-        assert _jit_cache.uncompiled([module.twice]) == []
+        with _jit_cache.noting_compilation(said.append):        # an empty cache
+            assert module.twice(3) == 6 and module.thrice(2) == 6
+        assert said == [_jit_cache.FIRST_RUN_NOTE]               # once for both
+        sys.modules.pop("fresh_kernels")
+        module = importlib.import_module("fresh_kernels")        # a new process's view
+        with _jit_cache.noting_compilation(said.append):        # the cache full
+            assert module.twice(4) == 8 and module.thrice(1) == 3
+        assert said == [_jit_cache.FIRST_RUN_NOTE]
     finally:
         sys.path.remove(str(tmp_path))
         sys.modules.pop("fresh_kernels", None)
     source = tmp_path / "v_12x10x8_uint8.raw"
     source.write_bytes(np.arange(960, dtype=np.uint8).tobytes())
-    monkeypatch.setattr(_jit_cache, "uncompiled", lambda kernels: ["a.kernel"])
     assert main(["segment", str(source), "-o", str(tmp_path / "a"), "--regions", "2"]) == 0
     err = capsys.readouterr().err.splitlines()
-    assert err[0].startswith("volseg: compiling the numba kernels (first run")
     for stage in ("curvature done in", "morse done in", "cut done in"):
         assert any(stage in line for line in err), (stage, err)
-    monkeypatch.setattr(_jit_cache, "uncompiled", lambda kernels: [])
-    assert main(["segment", str(source), "-o", str(tmp_path / "b"), "--regions", "2"]) == 0
-    assert "compiling" not in capsys.readouterr().err
+    # The command in new processes on an empty numba cache (the note, first) and then
+    # on the cache that run filled (no note): about 50 CPU-s of compilation, once.
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba-cache")}
+    errs = []
+    for out in ("b1", "b2"):
+        run = subprocess.run([sys.executable, "-m", "volseg", "segment", str(source), "-o",
+                              str(tmp_path / out), "--regions", "2"], capture_output=True,
+                             text=True, env=env)
+        assert run.returncode == 0, run.stderr
+        errs.append(run.stderr)
+    # Said as the first kernel starts compiling, inside the curvature stage.
+    lines = errs[0].splitlines()
+    assert lines.count(f"volseg: {_jit_cache.FIRST_RUN_NOTE}") == 1, errs[0]
+    assert lines.index(f"volseg: {_jit_cache.FIRST_RUN_NOTE}") < min(
+        i for i, line in enumerate(lines) if "curvature done in" in line)
+    assert "compiling" not in errs[1], errs[1]
     assert main(["segment", str(source), "-o", str(tmp_path / "c"), "-q", "--regions", "2"]) == 0
     assert capsys.readouterr().err == ""
     # -q silences progress, not warnings: 30 regions of a volume of fewer maxima.

@@ -26,12 +26,10 @@ from pathlib import Path
 import numpy as np
 
 from . import _validate
-from ._jit_cache import first_run_note
-from .curvature import entry_kernels as curvature_kernels
+from ._jit_cache import noting_compilation
 from .errors import UsageError, VolsegWarning
 from .fields import FIELDS, GIVEN, field_entry
 from .io import Frame, OutputSet
-from .morse import entry_kernels as morse_kernels
 from .outputs import (
     all_output_names,
     degenerate_cut_warning,
@@ -205,14 +203,12 @@ def segment_files(volumes, out_dir, *, force=False, wait=False, persistence_plot
     _refuse_noise_when_lazy(volumes, options.get("noise"))
     _check_labels_into_input(volumes, options.get("labels_into_input"), force)
     out_dir = check_out_dir(out_dir)
-    note = first_run_note([*curvature_kernels(), *morse_kernels()])
-    if note:
-        say(note)
     sets = output_sets(volumes, out_dir, force=force, wait=wait,
                        persistence_plot=persistence_plot, paraview=paraview,
                        field=options.get("field", "curvature"))
     summaries = []
     with ExitStack() as stack:
+        stack.enter_context(noting_compilation(say))
         for outputs in sets:
             stack.enter_context(outputs)
             for line in outputs.recovered:

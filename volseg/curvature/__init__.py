@@ -35,16 +35,7 @@ __all__ = [
     "check_padding",
     "bending_angles",
     "cotangent_weights",
-    "entry_kernels",
 ]
-
-
-def entry_kernels() -> list:
-    """The numba kernels of this package called from Python on a grid (compiled on
-    a first run, cached after it: `volseg._jit_cache`)."""
-    from ._grid_kernels import grid_kernel
-
-    return [grid_kernel]
 
 
 def __getattr__(name):  # the grid path pulls in numba: load it on first use

@@ -59,13 +59,4 @@ from .cuts import CutReport, cut_of
 __all__ = ["descending_complex", "MorseHierarchy", "grid_offsets", "check_cut",
            "check_measure_cut", "Measure", "MEASURE_REGISTRY", "MEASURES", "PERSISTENCE",
            "SIZE", "get_measure", "CurveSample", "curve_sample", "CutReport", "cut_of",
-           "entry_kernels", "AUTO_GAP_SIGNIFICANCE"]
-
-
-def entry_kernels() -> list:
-    """The numba kernels of this package called from Python (compiled on a first run,
-    cached after it: `volseg._jit_cache`); the helpers they inline have no cache."""
-    from ._kernels import steepest_ascent
-    from ._prune import prune_events
-
-    return [steepest_ascent, prune_events]
+           "AUTO_GAP_SIGNIFICANCE"]
