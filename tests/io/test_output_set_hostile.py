@@ -249,3 +249,68 @@ def test_release_after_the_folder_was_removed_raises_nothing(tmp_path):
     shutil.rmtree(folder)                       # a user cleaning up during the run
     out.release()
     assert not out._lock.held
+
+
+def _snapshots_during_commit(folder, monkeypatch):
+    """The folder's files of stem fuel after every rename the commit makes."""
+    from volseg.io import output_set
+
+    seen = []
+    real = os.replace
+
+    def replace(src, dst):
+        real(src, dst)
+        seen.append(sorted(p.name for p in folder.iterdir() if p.name.startswith("fuel_")))
+
+    monkeypatch.setattr(output_set.os, "replace", replace)
+    return seen
+
+
+def test_the_summary_goes_first_and_comes_last_with_nothing_stale_beside_it(
+        tmp_path, monkeypatch):
+    """Issue 57 (#12): a reader saw a partial folder between a commit's renames. The
+    summary (the set's index) is now moved aside first and placed last, after every
+    other new file and after the older run's other outputs are gone: whenever a
+    summary is there, the files beside it are exactly one run's set."""
+    old = {"fuel_labels.nii.gz": "old", "fuel_summary.json": "old", "fuel_volumes.vti": "old",
+           "fuel_persistence.png": "old"}
+    for name, text in old.items():
+        (tmp_path / name).write_text(text)
+    seen = _snapshots_during_commit(tmp_path, monkeypatch)
+    names = {"labels": "fuel_labels.nii.gz", "curvature": "fuel_curvature.nii.gz",
+             "summary": "fuel_summary.json"}
+    with OutputSet(tmp_path, "fuel", names, force=True,
+                   owns=["fuel_volumes.vti", "fuel_persistence.png"]) as out:
+        out.commit(lambda paths: [p.write_text("new") for p in paths.values()])
+    with_summary = [files for files in seen if "fuel_summary.json" in files]
+    assert with_summary and all(files in (sorted(old), sorted(names.values()))
+                                for files in with_summary)
+    first_new = seen.index(sorted(names.values()))
+    assert "fuel_summary.json" not in seen[first_new - 1]      # placed last
+    assert seen[-1] == sorted(names.values())
+    assert all((tmp_path / n).read_text() == "new" for n in names.values())
+
+
+def test_read_set_reads_one_runs_set_or_says_it_is_being_written(tmp_path):
+    """`read_set`: a read overlapping a commit is read again and gives the new run's
+    files only; a set left in a commit (an interrupted one) is refused naming it."""
+    from volseg.io.output_set import read_set
+
+    names = {"labels": "fuel_labels.nii.gz", "summary": "fuel_summary.json"}
+    with OutputSet(tmp_path, "fuel", names) as out:
+        out.commit(lambda paths: [p.write_text("1") for p in paths.values()])
+    reads = []
+
+    def read():
+        labels = (tmp_path / "fuel_labels.nii.gz").read_text()
+        if not reads:             # a second run commits while this one reads
+            with OutputSet(tmp_path, "fuel", names, force=True) as again:
+                again.commit(lambda paths: [p.write_text("2") for p in paths.values()])
+        reads.append(labels)
+        return labels, (tmp_path / "fuel_summary.json").read_text()
+
+    assert read_set(tmp_path / "fuel_summary.json", "fuel", read, pause=0) == ("2", "2")
+    assert reads == ["1", "2"]
+    _staging(tmp_path, journal={"names": list(names.values()), "discard": []})
+    with pytest.raises(OutputError, match="being written"):
+        read_set(tmp_path / "fuel_summary.json", "fuel", read, tries=3, pause=0)

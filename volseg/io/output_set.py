@@ -13,7 +13,12 @@ Guarantees, for a folder and a stem (``fuel`` -> ``fuel_labels.nii.gz``, ...):
   ones moved into place. A failure during that rolls back to the complete old set;
   a process killed during it (a window of a few renames) leaves the journal, and
   the next writer of that stem rolls the new set forward. A staging folder without
-  a journal (killed while computing or writing) is simply removed by the next one.
+  a journal (killed while computing or writing) is simply removed by the next one;
+- **what a reader can rely on**: the summary (the set's index) is moved aside first
+  and placed last, after every other file is placed and everything stale of an older
+  run is gone. A summary present with no journal beside it indexes a complete set of
+  its run; a reader that finds no journal, reads, then finds the same summary file
+  and still no journal read one run's set (`read_set`; the napari reader does).
 """
 
 from __future__ import annotations
@@ -25,11 +30,12 @@ import re
 import shutil
 import stat
 import tempfile
+import time
 from pathlib import Path
 
 from ..errors import OutputError  # noqa: F401 (re-exported)
 
-__all__ = ["OutputSet", "OutputError", "FolderLock", "recover"]
+__all__ = ["OutputSet", "OutputError", "FolderLock", "recover", "committing", "read_set"]
 
 _STAGING = ".volseg-staging-"
 _JOURNAL = "COMMIT"
@@ -234,18 +240,63 @@ def recover(folder, stem: str) -> list[str]:
             old = staging / "old"
             if not _real_dir(old):
                 os.mkdir(old)
-            for name in journal["names"]:
+            for name in journal["discard"]:       # first: nothing stale beside the index
+                _remove(folder / name)
+            for name in journal["names"]:         # in order: the index last
                 new = staging / "new" / name
                 if os.path.lexists(new):
                     _place(new, folder / name, old / name)
-            for name in journal["discard"]:
-                _remove(folder / name)
             done.append(f"{staging.name}: completed an interrupted commit of "
                         f"{len(journal['names'])} files")
         else:
             done.append(f"{staging.name}: removed the staging of an interrupted run")
         shutil.rmtree(staging, ignore_errors=True)
     return done
+
+
+def committing(folder, stem: str) -> bool:
+    """Whether a commit of `stem`'s set is under way in `folder`, or was interrupted (a
+    staging folder with a journal: the next writer of the stem finishes it)."""
+    try:
+        return any(os.path.lexists(s / _JOURNAL) for s in _stagings(Path(folder), stem))
+    except OSError:
+        return False
+
+
+def _identity(path: Path):
+    try:
+        info = os.stat(path)
+    except FileNotFoundError:
+        return None
+    return info.st_ino, info.st_dev, info.st_mtime_ns, info.st_size
+
+
+def read_set(index, stem: str, read, *, tries: int = 40, pause: float = 0.05):
+    """``read()`` of the set indexed by `index` (its summary) as one run wrote it.
+
+    A commit moves the index aside first and places it last, under a journal: a read
+    that starts with no journal and ends with the same index file and still no
+    journal saw no commit, so every file it read is of the index's run. Otherwise it
+    is read again (a commit is a few renames); `OutputError` when the set stays in a
+    commit (an interrupted one: the next volseg run of the stem finishes it). An
+    error of `read` while the set changed is retried; on a set that did not, raised.
+    """
+    index = Path(index)
+    for _ in range(tries):
+        before = None if committing(index.parent, stem) else _identity(index)
+        if before is not None:
+            try:
+                value = read()
+            except (OSError, ValueError):
+                if _identity(index) == before and not committing(index.parent, stem):
+                    raise
+            else:
+                if _identity(index) == before and not committing(index.parent, stem):
+                    return value
+        time.sleep(pause)
+    raise OutputError(f"{index}: its set is being written (a commit of {stem}_* under way, "
+                      "or interrupted: the next volseg run of that name finishes it); open "
+                      "it again in a moment")
 
 
 class OutputSet:
@@ -267,6 +318,11 @@ class OutputSet:
         Every other file name a set of this stem can have (other options' outputs): an
         existing one is refused like a target without `force`, and removed with the
         commit, so no file of an older run stays beside the new set.
+    last : str or None
+        The kind that indexes the set (the summary): moved aside first and placed
+        last, after every other file is placed and everything stale is gone. A
+        reader's rule: `read_set` (or: no commit journal, then read, then the same
+        index file and still no journal).
 
     Examples
     --------
@@ -275,9 +331,10 @@ class OutputSet:
     """
 
     def __init__(self, folder, stem: str, names: dict, *, force: bool = False, wait: bool = False,
-                 owns=()):
+                 owns=(), last: str | None = "summary"):
         self.folder = Path(folder)
         self.stem = stem
+        self.last = last
         self.targets = {kind: self.folder / name for kind, name in names.items()}
         self.owned = [self.folder / name for name in sorted(set(owns) - set(names.values()))]
         self.force = force
@@ -362,33 +419,44 @@ class OutputSet:
             stale = [path for path in self.owned if os.path.lexists(path)]
             self.discard = [*self.discard, *stale]      # an older run's other outputs
             journal = staging / f".{_JOURNAL}.part"
-            journal.write_text(json.dumps({"names": [t.name for t in self.targets.values()],
+            journal.write_text(json.dumps({"names": [t.name for t in self._in_order()],
                                            "discard": [p.name for p in self.discard]}))
             _fsync(journal)
             os.replace(journal, staging / _JOURNAL)
             _fsync(staging)
             self._swap(staging)
-            for path in self.discard:
-                _remove(path)
         finally:
             shutil.rmtree(staging, ignore_errors=True)
         return dict(self.targets)
 
+    def _in_order(self) -> list[Path]:
+        """The targets in the order they are placed: the index (`last`) last."""
+        index = self.targets.get(self.last)
+        return [t for t in self.targets.values() if t != index] + (
+            [index] if index is not None else [])
+
     def _swap(self, staging: Path):
+        """Move the old set and what it leaves behind aside (the index first), then
+        place the new set (the index last); undone on any failure. What is moved aside
+        goes with the staging folder."""
+        order = self._in_order()
+        aside_names = {path: staging / "old" / path.name for path in order[::-1]}
+        aside_names.update({path: staging / "old" / f"discarded-{path.name}"
+                            for path in self.discard})
         moved_aside, placed = [], []
         try:
-            for target in self.targets.values():
-                if os.path.lexists(target):
-                    os.replace(target, staging / "old" / target.name)
-                    moved_aside.append(target)
-            for target in self.targets.values():
+            for path, aside in aside_names.items():
+                if os.path.lexists(path):
+                    os.replace(path, aside)
+                    moved_aside.append(path)
+            for target in order:
                 os.replace(staging / "new" / target.name, target)
                 placed.append(target)
         except BaseException:
             for target in placed:
                 os.replace(target, staging / "new" / target.name)
-            for target in moved_aside:
-                os.replace(staging / "old" / target.name, target)
+            for path in moved_aside:
+                os.replace(aside_names[path], path)
             (staging / _JOURNAL).unlink(missing_ok=True)
             raise
 

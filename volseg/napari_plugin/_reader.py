@@ -125,8 +125,19 @@ def _is_volseg_summary(path: Path) -> bool:
 
 def _output_set(summary: Path) -> list[tuple]:
     """The curvature and labels beside `summary`: the Zarr stores of a blockwise run,
-    else the NIfTI files."""
+    else the NIfTI files; read as one run wrote them, never halfway through another
+    run's commit of the stem (`volseg.io.output_set.read_set`; a Zarr store is read
+    lazily, later, as napari shows it)."""
+    from ..io.output_set import read_set
+
     stem = summary.name[: -len(_SUMMARY)]
+    try:
+        return read_set(summary, stem, lambda: _set_layers(summary, stem))
+    except VolsegError as err:
+        raise ValueError(str(err)) from None
+
+
+def _set_layers(summary: Path, stem: str) -> list[tuple]:
     info = _summary_of(summary)
     if info is None:
         raise ValueError(f"{summary}: not a volseg summary (a regular JSON file with "
