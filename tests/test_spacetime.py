@@ -163,8 +163,8 @@ def test_cli_isosurface_writes_a_paraview_series(tmp_path, capsys):
         assert f'file="blob_iso_t{t:04d}.vtu"' in pvd
         step = meshio.read(out / f"blob_iso_t{t:04d}.vtu")
         assert step.points.shape[1] == 3 and len(step.cells_dict["triangle"]) > 0
-        assert set(step.point_data) == {"curvature", "label", "vertex", "Normals"}
-        assert np.array_equal(step.point_data["label"], saved["labels"][step.point_data["vertex"]])
+        assert set(step.point_data) == {"curvature", "labels", "vertex", "Normals"}
+        assert np.array_equal(step.point_data["labels"], saved["labels"][step.point_data["vertex"]])
     assert (out / "blob_iso_preview.png").stat().st_size > 10_000
     # Existing outputs are refused, nothing changes.
     before = sorted(p.name for p in out.iterdir())

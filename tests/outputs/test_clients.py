@@ -304,6 +304,9 @@ def test_isosurface_series_in_world_space_with_real_time_and_normals(tmp_path):
         reader.SetFileName(str(tmp_path / "o" / dataset.get("file")))
         reader.Update()
         grid = reader.GetOutput()
+        # The unit as the .vts and .vti say it; the arrays named as theirs.
+        assert grid.GetFieldData().GetAbstractArray("unit").GetValue(0) == "micrometer"
+        assert grid.GetPointData().GetScalars().GetName() == "labels"
         if not grid.GetNumberOfPoints():
             continue
         points = vtk_to_numpy(grid.GetPoints().GetData())

@@ -95,12 +95,12 @@ def _float32_places(frame: Frame, shape) -> bool:
     return largest * 2.0**-24 <= 1e-3 * min(frame.spacing)
 
 
-def _field_data(frame: Frame) -> str:
-    """The frame's unit as VTK field data (a string array; ParaView's Information
-    panel lists it): VTK's own files have no unit."""
-    if not frame.unit:
+def field_data(unit: str | None) -> str:
+    """A length `unit` as VTK XML field data (a string array ``unit``; ParaView's
+    Information panel lists it): VTK's own files have no unit. Empty for None."""
+    if not unit:
         return ""
-    codes = " ".join(str(b) for b in frame.unit.encode("utf-8")) + " 0"
+    codes = " ".join(str(b) for b in unit.encode("utf-8")) + " 0"
     return ('    <FieldData>\n      <Array type="String" Name="unit" NumberOfTuples="1" '
             f'format="ascii">\n        {codes}\n      </Array>\n    </FieldData>\n')
 
@@ -128,7 +128,7 @@ def _write_xml(path, kind: str, grid: str, shape, arrays: dict, types: dict, fra
         '<?xml version="1.0"?>\n'
         f'<VTKFile type="{kind}" version="1.0" byte_order="LittleEndian" '
         'header_type="UInt64">\n'
-        f'  <{grid}>\n{_field_data(frame)}'
+        f'  <{grid}>\n{field_data(frame.unit)}'
         f'    <Piece Extent="{extent}">\n'
         f'      <PointData Scalars="{scalars or next(iter(arrays))}">\n{arrays_xml}'
         f'      </PointData>\n{points_xml}    </Piece>\n  </{kind}>\n'

@@ -93,24 +93,31 @@ def world_points(result, frame) -> tuple:
     return points, np.nan_to_num(normals, nan=0.0)
 
 
-def _write_vtu(path, result, piece, points, normals):
+def _write_vtu(path, result, piece, points, normals, unit=None):
+    """One step's slice as a ``.vtu``: the arrays named as in the ``.vti`` / ``.vts``
+    (``labels``, ``curvature``), the world's `unit` as the field data ``unit``."""
     import meshio
+
+    from ..io.vtk_image import field_data
 
     seg = result.segmentation
     triangles = _wound_with(piece.triangles, points[piece.vertex], normals[piece.vertex])
     cells = [("triangle", triangles)] if len(triangles) else []
     mesh = meshio.Mesh(points[piece.vertex], cells, point_data={
         "curvature": seg.curvature[piece.vertex].astype(np.float32),
-        "label": seg.labels[piece.vertex].astype(np.int32),
+        "labels": seg.labels[piece.vertex].astype(np.int32),
         "vertex": piece.vertex.astype(np.int64),
         "Normals": normals[piece.vertex].astype(np.float32)})
     meshio.write(path, mesh, file_format="vtu")
     # meshio names no attribute: mark the normals (ParaView shades with them) and the
     # labels as the active scalars. Appended-data offsets count from the data section,
     # so the longer header moves nothing.
-    text = Path(path).read_bytes()
-    Path(path).write_bytes(text.replace(b"<PointData>",
-                                        b'<PointData Normals="Normals" Scalars="label">', 1))
+    # The unit's field data goes before the piece (no appended data moves either).
+    text = Path(path).read_bytes().replace(
+        b"<PointData>", b'<PointData Normals="Normals" Scalars="labels">', 1)
+    if unit:
+        text = text.replace(b"<Piece ", field_data(unit).encode() + b"<Piece ", 1)
+    Path(path).write_bytes(text)
 
 
 def _wound_with(triangles, points, normals):
@@ -186,7 +193,8 @@ def write_series_segmentation(outputs, result, slices, info: dict, *, title: str
     info = {**info, "outputs": {kind: str(path) for kind, path in outputs.targets.items()}}
     seg = result.segmentation
     surface = result.surface
-    points, normals = world_points(result, frame or Frame.from_spacing(result.spacing[:3]))
+    frame = frame or Frame.from_spacing(result.spacing[:3])
+    points, normals = world_points(result, frame)
 
     def write(paths):
         np.savez_compressed(paths["mesh"], vertices=surface.vertices, tetrahedra=surface.simplices,
@@ -197,7 +205,7 @@ def write_series_segmentation(outputs, result, slices, info: dict, *, title: str
         names = []
         for piece in slices:
             target = paths[f"t{piece.step:04d}"]
-            _write_vtu(target, result, piece, points, normals)
+            _write_vtu(target, result, piece, points, normals, frame.unit)
             names.append(Path(outputs.targets[f"t{piece.step:04d}"]).name)
         _write_pvd(paths["pvd"], names,
                    [time_offset + float(s.step) * time_step for s in slices])
