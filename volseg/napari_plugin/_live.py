@@ -60,6 +60,7 @@ class LiveSegmentation:
         self.source, self.options = source, options
         self.result: Segmentation | None = None
         self._spare = None           # the labels buffer `prepare` writes into
+        self._default_measure = None  # the measure the field's rule chose in `run`
         self._work: Path | None = None
         self._curve = None
 
@@ -78,6 +79,7 @@ class LiveSegmentation:
 
         volume = self.volume
         self._curve = self._spare = None
+        self._default_measure = None
         if _validate.is_lazy(volume.data):
             self.result = self._blockwise(volume, say)
         else:
@@ -88,6 +90,8 @@ class LiveSegmentation:
             buffer = np.empty(result.labels.shape, labels_dtype(self.max_regions()))
             buffer[...] = result.labels
             self.result = dataclasses.replace(result, labels=buffer)
+        if self.options.measure is None:       # the field's rule chose it
+            self._default_measure = self.result.measure
         return self.result
 
     def _blockwise(self, volume, say) -> Segmentation:
@@ -116,9 +120,10 @@ class LiveSegmentation:
     def set_measure(self, measure: str | None):
         """Cut by another measure (docs/design.md section 12; None: the field's),
         keeping the region count: the hierarchy has every measure, nothing is
-        recomputed."""
+        recomputed. The field's default is the measure the run chose by the field's
+        rule (the gradient's volume, or area where the volume cut was degenerate)."""
         if measure is None:
-            measure = get_field(self.options.field).measure
+            measure = self._default_measure or get_field(self.options.field).measure
         return self.adopt(self.prepare(self.result.n_regions, measure=measure))
 
     def prepare(self, n_regions: int | None = None, *, threshold: float | None = None,
