@@ -30,6 +30,7 @@ import numpy as np
 from .._distinct import slot_of
 from .._sizes import SizedByArrays
 from .._union_find import find_root
+from ._kernels import counting_sort
 from ._prune import masked_range
 
 __all__ = ["Basins", "records", "block_records", "joined", "saliency", "merge_order"]
@@ -163,28 +164,12 @@ def saliency(basins: Basins, source, target, saddle_value, n_max: int,
 
 
 @numba.njit(cache=True, nogil=True)
-def _by_rank(rank, n_ranks):
-    """(start, order): the records in rank order by a counting sort, rank r's at
-    order[start[r]:start[r + 1]]."""
-    start = np.zeros(n_ranks + 1, dtype=np.int64)
-    for i in range(len(rank)):
-        start[rank[i] + 1] += 1
-    for r in range(n_ranks):
-        start[r + 1] += start[r]
-    at = start[:-1].copy()
-    order = np.empty(len(rank), dtype=np.int64)
-    for i in range(len(rank)):
-        order[at[rank[i]]] = i
-        at[rank[i]] += 1
-    return start, order
-
-
-@numba.njit(cache=True, nogil=True)
 def _sweep(cell, rank, count, sums, source, target, level, n_max, volume, out):
     parent = np.arange(n_max)
     area = np.zeros(n_max, dtype=count.dtype)
     total = np.zeros(n_max, dtype=sums.dtype)
-    start, order = _by_rank(rank, len(source) + 1)
+    order = np.empty(len(rank), dtype=np.int64)
+    start = counting_sort(rank, len(source) + 1, order)
     for e in range(len(source)):
         for t in range(start[e], start[e + 1]):
             i = order[t]

@@ -357,3 +357,20 @@ def roots(vertices, up):
             out[n] = v
             n += 1
     return out
+
+
+@numba.njit(cache=True, nogil=True)
+def counting_sort(keys, n_keys, order):
+    """A stable counting sort of `keys` (each in 0..n_keys-1): fills `order` (its
+    type the caller's) with the indices by key and returns each key's start (n_keys
+    + 1,): key k's indices, increasing, are order[start[k]:start[k + 1]]."""
+    start = np.zeros(n_keys + 1, dtype=np.int64)
+    for i in range(len(keys)):
+        start[keys[i] + 1] += 1
+    for k in range(n_keys):
+        start[k + 1] += start[k]
+    fill = start[:-1].copy()
+    for i in range(len(keys)):
+        order[fill[keys[i]]] = i
+        fill[keys[i]] += 1
+    return start

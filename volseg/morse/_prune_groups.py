@@ -37,6 +37,7 @@ from .._distinct import index_type
 from .._sizes import SizedByArrays
 from .._union_find import find_root
 from ._group_tree import block_tree
+from ._kernels import counting_sort
 from ._prune import _before, _joined, _meld, _rekeyed, _remove, _sift_down
 
 __all__ = []
@@ -243,7 +244,8 @@ def leaves(source, target, base, leaf_of, n_leaves) -> list:
     outside its leaf."""
     index = index_type(max(len(source), len(leaf_of), n_leaves))
     leaf_of = leaf_of.astype(index, copy=False)
-    by_leaf, max_at = _maxima_bucketed(leaf_of, n_leaves)
+    by_leaf = np.empty(len(leaf_of), dtype=index)     # maxima by leaf, ids increasing
+    max_at = counting_sort(leaf_of, n_leaves, by_leaf)
     event, near, far, at = _bucketed(source, target, leaf_of, n_leaves)
     local = np.empty(len(leaf_of), dtype=index)       # each maximum's place in its leaf
     local[by_leaf] = np.arange(len(leaf_of), dtype=index) - max_at[leaf_of[by_leaf]]
@@ -257,21 +259,6 @@ def leaves(source, target, base, leaf_of, n_leaves) -> list:
                               np.where(far_in, 0, base[far[e]]), np.where(far_in, -1, far[e]),
                               local=(local[near[e]], np.where(far_in, local[far[e]], -1))))
     return out
-
-
-@numba.njit(cache=True, nogil=True)
-def _maxima_bucketed(leaf_of, n_leaves):
-    """(maxima by leaf, ids increasing in each; each leaf's start, (L + 1,))."""
-    at = np.zeros(n_leaves + 1, dtype=np.int64)
-    for m in range(len(leaf_of)):
-        at[leaf_of[m] + 1] += 1
-    at = np.cumsum(at)
-    fill = at[:-1].copy()
-    out = np.empty(len(leaf_of), dtype=leaf_of.dtype)
-    for m in range(len(leaf_of)):
-        out[fill[leaf_of[m]]] = m
-        fill[leaf_of[m]] += 1
-    return out, at
 
 
 @numba.njit(cache=True, nogil=True)
