@@ -362,3 +362,16 @@ def test_compare_refuses_labels_on_different_grids_unless_asked(tmp_path, capsys
     assert main(["compare", str(tmp_path / "a.nii.gz"), str(tmp_path / "c.nii.gz"),
                  "--mask", str(tmp_path / "b.nii.gz")]) == 2
     assert "--mask" in capsys.readouterr().err
+
+
+def test_the_gradients_fallback_to_area_is_said_once(volvis_dir, tmp_path, capsys):
+    """The tooth's gradient cut by volume is degenerate: the run cuts by area and says
+    why, once, on stderr (from the cut record's flag, not from parsing its text); an
+    asked measure says nothing of the kind."""
+    tooth = str(volvis_dir / "tooth_103x94x161_uint8.raw")
+    assert main(["segment", tooth, "-o", str(tmp_path / "a"), "--field", "gradient"]) == 0
+    said = [line for line in capsys.readouterr().err.splitlines() if "cut by area" in line]
+    assert len(said) == 1 and "by volume the cut was degenerate" in said[0]
+    assert main(["segment", tooth, "-o", str(tmp_path / "b"), "--field", "gradient",
+                 "--measure", "volume"]) == 0
+    assert "cut by area" not in capsys.readouterr().err

@@ -410,7 +410,7 @@ def _write_result(paths, volume, result, data, value_range, outputs, *, checksum
     if "ngff" in paths and not frame.axis_aligned:
         say(f"{name}: the OME-Zarr image is placed axis-aligned (NGFF 0.5 holds no rotation "
             "or flip); the NIfTI outputs and the .vti carry the input's full affine")
-    if result.cut.get("measure_rule", "").startswith(f"{result.measure}:"):
+    if result.cut.get("fell_back"):
         say(f"{name}: cut by {result.cut['measure_rule']}")
     info = summary(result, name=name, source=volume.path, checksum=checksum,
                    files=volume.files, frame=frame, noise=noise, seed=seed,

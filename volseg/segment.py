@@ -524,19 +524,22 @@ def _unless_degenerate(hierarchy, cut: CutRequest, labels, report: CutReport) ->
     """The cut by `cut.fallback` instead when the cut by the field's default measure is
     degenerate (`volseg.metrics.region_spread`: one region of most of the volume and
     specks, as the volume hierarchy leaves a single homogeneous object); the report
-    records the rule either way (``measure_rule``)."""
+    records the rule either way (``measure_rule``) and whether it was taken
+    (``fell_back``)."""
     from .metrics import region_spread
 
     sizes = _label_sizes(labels, report.n_regions)
     spread = region_spread(sizes[1:]) if sizes[1:].sum() else {"degenerate": False}
     rule = f"{cut.measure} (the field's default)"
-    if spread["degenerate"]:
+    fell_back = bool(spread["degenerate"])
+    if fell_back:
         rule = (f"{cut.fallback}: by {cut.measure} the cut was degenerate (largest region "
                 f"{spread['largest_share']:.0%}, {spread['regions_at_least_1_percent']} of "
                 f"{report.n_regions} regions >= 1 %)")
         labels, report = cut_of(hierarchy, dataclasses.replace(cut, measure=cut.fallback,
                                                                fallback=None))
-    return labels, dataclasses.replace(report, record={**report.record, "measure_rule": rule})
+    return labels, dataclasses.replace(report, record={**report.record, "measure_rule": rule,
+                                                       "fell_back": fell_back})
 
 
 def _label_sizes(labels, n_regions: int) -> np.ndarray:
