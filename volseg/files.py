@@ -21,12 +21,14 @@ import shutil
 import time
 import warnings
 from contextlib import ExitStack
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 
 from . import _validate
 from ._jit_cache import noting_compilation
+from ._responsive import responsive
 from .errors import UsageError, VolsegWarning
 from .fields import FIELDS, GIVEN, field_entry
 from .io import Frame, OutputSet
@@ -326,8 +328,13 @@ def segment_to_files(volume, outputs, *, operator="weighted", n_regions=None,
         say(f"{name}: {what} and Morse complex of a "
             f"{'x'.join(map(str, data.shape))} volume{blocks}")
         try:
-            result, value_range = _stages_saying_warnings(data, request, storage, name, say,
-                                                          str(volume.path or name))
+            # In memory the stages are long compiled calls: run where an interrupt of
+            # the main thread is not kept waiting by them (a blockwise run waits in
+            # Dask's scheduler loop, which is interruptible already).
+            stages = _stages_saying_warnings if lazy else partial(responsive,
+                                                                  _stages_saying_warnings)
+            result, value_range = stages(data, request, storage, name, say,
+                                         str(volume.path or name))
         except ValueError:     # the input refused: no work worth resuming
             if lazy:
                 shutil.rmtree(storage.work_folder, ignore_errors=True)
