@@ -251,6 +251,17 @@ def test_a_slider_drag_cuts_at_most_once_per_throttle_period(make_napari_viewer,
         return prepare(*args, **kwargs)
 
     widget.live.prepare = counted
+    # A cut that fails with a bug (no result) does not stall the queue.
+    widget.live.prepare = lambda *args, **kwargs: {}["a bug"]
+    with qtbot.capture_exceptions() as raised:        # napari shows it; pytest-qt keeps it
+        widget.count_slider.setValue(500)
+        qtbot.waitUntil(lambda: widget._cutting is None, timeout=5000)
+    assert [kind.__name__ for kind, *_ in raised] == ["KeyError"]
+    widget.live.prepare = counted
+    widget.count_slider.setValue(0)
+    qtbot.wait(2 * SLIDER_THROTTLE_MS)
+    widget.wait_for_cut()
+    cuts.clear()
     repaints = []
     widget.canvas.repaint = lambda *args: repaints.append(args)
     for position in np.linspace(0, 1000, 40).astype(int):

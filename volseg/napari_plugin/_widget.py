@@ -351,8 +351,16 @@ class SegmentWidget(QWidget):
             return
         worker = create_worker(_guarded, live.prepare, **cut)
         worker.returned.connect(lambda outcome: self._cut_ready(live, outcome))
+        # A bug's exception returns nothing (napari shows its traceback): the queue
+        # must not wait for that cut forever.
+        worker.finished.connect(lambda: self._cut_ended(worker))
         self._cutting = worker
         worker.start()
+
+    def _cut_ended(self, worker):
+        if self._cutting is worker:
+            self._cutting = None
+            self._next_cut()
 
     def _cut_ready(self, live, outcome):
         result, err = outcome
