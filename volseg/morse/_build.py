@@ -24,8 +24,12 @@ def _descending_cells(graph: _Neighbourhood, phases: _Phases):
     the id of the maximum v's steepest ascent reaches."""
     index = index_type(len(graph.values) + 1)
     up = np.empty(len(graph.values), dtype=index)
-    kernels.steepest_ascent(graph.values, graph.vertices, graph.grid, graph.offsets,
-                            graph.indptr, graph.indices, up)
+    if graph.grid and len(graph.offsets) <= kernels.UNROLLED:
+        kernels.steepest_ascent_unrolled(graph.values, graph.vertices,
+                                         kernels.unrolled(graph.offsets), up)
+    else:
+        kernels.steepest_ascent(graph.values, graph.vertices, graph.grid, graph.offsets,
+                                graph.indptr, graph.indices, up)
     phases.done("steepest ascent")
     cell = np.full(len(graph.values), -1, dtype=index)
     kernels.resolve_cells(graph.vertices, up, cell)

@@ -25,6 +25,22 @@ def _higher(values, u, v):
     return values[u] > values[v] or (values[u] == values[v] and u > v)
 
 
+#: Grid neighbourhoods of at most this many offsets are walked by a loop of exactly
+#: this length (`unrolled`: the offsets padded by 0, the vertex itself, which is never
+#: higher than the best so far and never in another cell): a loop of known length is
+#: unrolled, 4x faster steepest ascent at 256^3 (Kuhn's 14 offsets).
+UNROLLED = 16
+
+
+def unrolled(offsets) -> np.ndarray:
+    """`offsets` (flat, int64) padded to `UNROLLED` entries by 0, or as they are if
+    longer (18 and 26 neighbours take the loop of unknown length)."""
+    offsets = np.asarray(offsets, dtype=np.int64)
+    if len(offsets) > UNROLLED:
+        return offsets
+    return np.concatenate([offsets, np.zeros(UNROLLED - len(offsets), dtype=np.int64)])
+
+
 @numba.njit(cache=True, parallel=True)
 def steepest_ascent(values, vertices, grid, offsets, indptr, indices, up):
     """up[v] = v's highest neighbour if higher than v, else v (a maximum)."""
@@ -44,10 +60,26 @@ def steepest_ascent(values, vertices, grid, offsets, indptr, indices, up):
         up[v] = best
 
 
+@numba.njit(cache=True, parallel=True)
+def steepest_ascent_unrolled(values, vertices, offsets, up):
+    """`steepest_ascent` on a grid, `offsets` padded by `unrolled`."""
+    for n in numba.prange(len(vertices)):
+        v = vertices[n]
+        best = v
+        best_value = values[v]
+        for t in range(UNROLLED):
+            u = v + offsets[t]
+            x = values[u]
+            if x >= best_value:          # rarely taken: a neighbour as high as the best
+                if x > best_value or u > best:
+                    best = u
+                    best_value = x
+        up[v] = best
+
+
 @numba.njit(cache=True, nogil=True)
-def resolve_cells(vertices, up, cell):
-    """cell[v] = the maximum reached from v by following `up` (path compression)."""
-    for n in range(len(vertices)):
+def _resolve_run(vertices, up, cell, lo, hi):
+    for n in range(lo, hi):
         v = vertices[n]
         root = v
         while up[root] != root:
@@ -58,6 +90,22 @@ def resolve_cells(vertices, up, cell):
             up[x] = root
             x = nxt
         cell[v] = root
+
+
+#: Runs of vertices the path compression is cut into.
+_RESOLVE_RUNS = 64
+
+
+@numba.njit(cache=True, parallel=True)
+def resolve_cells(vertices, up, cell):
+    """cell[v] = the maximum reached from v by following `up`, with path compression,
+    in parallel runs of vertices. Two runs may compress the same path at once: each
+    writes into up[x] only the one root x's path reaches, and never into a root, so
+    every order of the writes leaves every path leading to its own root: the same
+    cells and the same maxima (`roots`)."""
+    n = len(vertices)
+    for r in numba.prange(_RESOLVE_RUNS):
+        _resolve_run(vertices, up, cell, n * r // _RESOLVE_RUNS, n * (r + 1) // _RESOLVE_RUNS)
 
 
 @numba.njit(cache=True, parallel=True)
@@ -267,7 +315,7 @@ def group_by_cell(vertices, cell, n_cells, starts, members):
 @numba.njit(cache=True, nogil=True)
 def _pairs_of_cells(values, members, starts, visit, lo, hi, grid, offsets, indptr, indices,
                     cell, degree, out_a, out_b, out_v, start, capacity, table, part_b, part_v,
-                    part_slot):
+                    part_f, part_slot):
     """Unique cell pairs (a, b), a in visit[lo:hi] and b > a, each with its highest saddle.
 
     For every vertex of cell a and every neighbour u in a cell b > a, the edge's saddle
@@ -289,13 +337,17 @@ def _pairs_of_cells(values, members, starts, visit, lo, hi, grid, offsets, indpt
         m = 0
         for idx in range(starts[a], starts[a + 1]):
             v = members[idx]
+            fv = values[v]
             count = len(offsets) if grid else indptr[v + 1] - indptr[v]
             for t in range(count):
                 u = v + offsets[t] if grid else indices[indptr[v] + t]
                 b = cell[u]
                 if b <= a:  # the same cell, a smaller one (seen from there), or off the vertices
                     continue
-                low = u if _higher(values, v, u) else v
+                fu = values[u]
+                v_higher = (fv > fu) | ((fv == fu) & (v > u))
+                low = u if v_higher else v              # selects: the order is a coin flip
+                fl = fu if v_higher else fv
                 slot = (b * 2654435761) & mask
                 while True:
                     k = table[slot]
@@ -303,12 +355,15 @@ def _pairs_of_cells(values, members, starts, visit, lo, hi, grid, offsets, indpt
                         table[slot] = m + 1
                         part_b[m] = b
                         part_v[m] = low
+                        part_f[m] = fl
                         part_slot[m] = slot
                         m += 1
                         break
                     if part_b[k - 1] == b:
-                        if _higher(values, low, part_v[k - 1]):
-                            part_v[k - 1] = low
+                        f, w = part_f[k - 1], part_v[k - 1]
+                        better = (fl > f) | ((fl == f) & (low > w))
+                        part_v[k - 1] = low if better else w
+                        part_f[k - 1] = fl if better else f
                         break
                     slot = (slot + 1) & mask
         for q in range(m):
@@ -334,11 +389,12 @@ def cell_pairs(values, members, starts, visit, bounds, chunks, grid, offsets, in
         table = np.zeros(table_sizes[c], dtype=np.int32)
         part_b = np.empty(room, dtype=cell.dtype)
         part_v = np.empty(room, dtype=members.dtype)
+        part_f = np.empty(room, dtype=np.float64)
         part_slot = np.empty(room, dtype=np.int64)
         counts[i] = _pairs_of_cells(values, members, starts, visit, bounds[c], bounds[c + 1],
                                     grid, offsets, indptr, indices, cell, degree, out_a, out_b,
                                     out_v, out_starts[i], capacity[i], table, part_b, part_v,
-                                    part_slot)
+                                    part_f, part_slot)
 
 
 @numba.njit(cache=True, nogil=True)
