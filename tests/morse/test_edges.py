@@ -3,7 +3,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from volseg.morse._edges import _FIRST_EDGES_PER_CELL, spanning_forest
+from volseg.morse._edges import _FIRST_EDGES_PER_CELL, _saddle_order, spanning_forest
 
 
 def _graph(seed, n_cells, n_edges, n_values):
@@ -49,3 +49,16 @@ def test_the_filter_runs_and_drops_edges_on_a_dense_graph():
 def test_no_edges_no_forest():
     empty = np.zeros(0, dtype=np.int64)
     assert spanning_forest(np.zeros(0), empty, empty, empty, 3).tolist() == []
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(2, 300), st.integers(0, 3000), st.integers(1, 40))
+def test_the_saddle_order_is_the_strict_order(seed, n_cells, n_edges, n_values):
+    """Runs of equal values both short (sorted in the kernel) and longer than 32
+    (sorted by numpy afterwards): the order is (value, saddle vertex, a, b) exactly,
+    for the whole edge list and for a subset."""
+    keys, saddle, a, b = _graph(seed, n_cells, n_edges, n_values)
+    assert _saddle_order(keys, saddle, a, b).tolist() == np.lexsort((b, a, saddle, keys)).tolist()
+    some = np.flatnonzero(np.random.default_rng(seed).random(len(keys)) < 0.5)
+    expected = some[np.lexsort((b[some], a[some], saddle[some], keys[some]))]
+    assert _saddle_order(keys, saddle, a, b, some).tolist() == expected.tolist()

@@ -5,8 +5,8 @@ explicit mesh (a function of `MeshParts`), for which dimensions n and whether it
 a consistent orientation, and how the grid path computes it: the kernel's inner-work
 code, the accumulator channels and the finishing step. The CLI's and pipelines'
 choices, the figures' colours and labels and the parametrised tests are derived from
-it. Adding an operator: one entry here, one mesh function, one kernel branch in
-`_grid_kernels._slab` with its finishing step in `_grid_finish`.
+it. Adding an operator: one entry here, one mesh function, one compiled pass in
+`_grid_kernels._PASSES` with its finishing step in `_grid_finish`.
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ class Operator:
     mesh: Callable                # f(MeshParts) -> (V,) values
     dimensions: tuple[int, ...] | None   # n it is defined for; None: any n >= 1
     oriented: bool                # needs a consistently oriented mesh
-    grid_code: int                # which inner work `_grid_kernels._slab` does
+    grid_code: int                # which pass of `_grid_kernels._PASSES` runs
     grid_channels: int            # accumulator channels of that work
     grid_finish: Callable         # f(acc, inner, spacing) -> (X, Y, Z) values
     summary: str

@@ -94,7 +94,9 @@ def _saddle_order(keys, saddle, edge_a, edge_b, edges=None):
     (curvature fields have plateaus): 2x faster than np.lexsort at 256^3.
     """
     order = np.argsort(keys) if edges is None else edges[np.argsort(keys[edges])]
-    _kernels.break_ties(order, keys, saddle, edge_a, edge_b)
+    for start, stop in _kernels.break_ties(order, keys, saddle, edge_a, edge_b):
+        run = order[start:stop]
+        order[start:stop] = run[np.lexsort((edge_b[run], edge_a[run], saddle[run]))]
     return order
 
 

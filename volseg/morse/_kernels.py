@@ -255,15 +255,21 @@ def _before(i, j, saddle, edge_a, edge_b):
 
 @numba.njit(cache=True, nogil=True)
 def break_ties(order, values, saddle, edge_a, edge_b):
-    """Within each run of equal values, sort `order` by (saddle vertex, a, b).
+    """Within each short run of equal values, sort `order` by (saddle vertex, a, b);
+    returns the long runs (more than 32 edges) as (K, 2) start, stop, left to the
+    caller (`_edges._saddle_order`, by numpy: numba's own argsort took 2 CPU-s to
+    compile).
 
-    `order` sorts `values` in any tie order; afterwards it sorts by (value, vertex,
-    cell pair) exactly, so the result does not depend on the sort used, nor on the
-    order in which the edges were found (several edges can share a saddle vertex,
-    and which merges first decides the events' targets). The values are read through
-    `order` (no sorted copy: one array of the edges less at the client's peak).
+    `order` sorts `values` in any tie order; with the long runs sorted too it sorts by
+    (value, vertex, cell pair) exactly, so the result does not depend on the sort
+    used, nor on the order in which the edges were found (several edges can share a
+    saddle vertex, and which merges first decides the events' targets). The values
+    are read through `order` (no sorted copy: one array of the edges less at the
+    client's peak).
     """
     n = len(order)
+    long_runs = np.empty((16, 2), dtype=np.int64)
+    n_long = 0
     start = 0
     while start < n:
         stop = start + 1
@@ -271,18 +277,10 @@ def break_ties(order, values, saddle, edge_a, edge_b):
         while stop < n and values[order[stop]] == first:
             stop += 1
         if stop - start > 32:
-            run = order[start:stop].copy()
-            keys = saddle[run]
-            run = run[np.argsort(keys, kind="mergesort")]
-            # equal saddle vertices (a few edges each): insertion sort by the pair
-            for i in range(1, len(run)):
-                item = run[i]
-                j = i - 1
-                while j >= 0 and _before(item, run[j], saddle, edge_a, edge_b):
-                    run[j + 1] = run[j]
-                    j -= 1
-                run[j + 1] = item
-            order[start:stop] = run
+            if n_long == len(long_runs):
+                long_runs = np.concatenate((long_runs, np.empty_like(long_runs)))
+            long_runs[n_long, 0], long_runs[n_long, 1] = start, stop
+            n_long += 1
         elif stop - start > 1:  # short runs (often one vertex's edges): insertion sort
             for i in range(start + 1, stop):
                 item = order[i]
@@ -292,6 +290,7 @@ def break_ties(order, values, saddle, edge_a, edge_b):
                     j -= 1
                 order[j + 1] = item
         start = stop
+    return long_runs[:n_long]
 
 
 @numba.njit(cache=True, nogil=True)
