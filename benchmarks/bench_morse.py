@@ -2,8 +2,13 @@
 
 Same smooth random field, same Kuhn 14-neighbourhood, one run, side by side:
 
-    python benchmarks/bench_morse.py            # 128^3
-    python benchmarks/bench_morse.py 128 256    # and 256^3 (about 4 minutes for the others)
+    python benchmarks/bench_morse.py                # 128^3
+    python benchmarks/bench_morse.py 128 256        # and 256^3 (about 4 minutes for the others)
+    python benchmarks/bench_morse.py --curvature    # bench_kernels.py's curvature field
+
+`--curvature`: the weighted curvature of an 8-bit smoothed random volume (sigma 3),
+the field of `bench_kernels.py` and issue 56 (50,792 maxima at 128^3), instead of the
+smooth random field.
 """
 
 import sys
@@ -15,7 +20,11 @@ import json, resource, time
 import numpy as np
 from scipy.ndimage import gaussian_filter
 n = {n}
-field = gaussian_filter(np.random.default_rng(0).standard_normal((n, n, n)), 2).astype(np.float64)
+field = gaussian_filter(np.random.default_rng(0).standard_normal((n, n, n)), {sigma})
+if {curvature}:
+    from volseg.curvature import grid_curvature
+    field = grid_curvature(np.round(255 * (field - field.min()) / np.ptp(field)).astype(np.uint8),
+                           "weighted")
 from volseg.morse import grid_offsets
 offsets = grid_offsets(3, "kuhn")
 base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
@@ -62,17 +71,19 @@ print(json.dumps(dict(total=time.perf_counter() - start, regions=int(labels.max(
 """
 
 
-def main(sizes):
+def main(sizes, curvature=False):
+    sigma = 3 if curvature else 2
     for n in sizes:
-        ours = in_fresh_process(VOLSEG.format(n=n))
+        ours = in_fresh_process(VOLSEG.format(n=n, sigma=sigma, curvature=curvature))
         print(f"{n}^3 volseg: build {ours['build']:.2f} s, cut to 30 regions {ours['cut']:.3f} s "
               f"({100 * ours['cut'] / ours['build']:.1f}% of the build), {ours['maxima']} maxima, "
               f"peak memory beyond the input {ours['bytes_per_voxel']:.1f} bytes/voxel", flush=True)
-        sk = in_fresh_process(SKIMAGE.format(n=n, threshold=ours["threshold"]))
+        sk = in_fresh_process(SKIMAGE.format(n=n, sigma=sigma, curvature=curvature,
+                                            threshold=ours["threshold"]))
         print(f"{n}^3 scikit-image h_maxima + watershed: {sk['total']:.2f} s "
               f"-> volseg is {sk['total'] / ours['total']:.1f}x faster", flush=True)
         try:
-            hi = in_fresh_process(HIGRA.format(n=n))
+            hi = in_fresh_process(HIGRA.format(n=n, sigma=sigma, curvature=curvature))
             print(f"{n}^3 higra watershed_hierarchy_by_dynamics: {hi['total']:.2f} s "
                   f"-> volseg is {hi['total'] / ours['total']:.1f}x faster", flush=True)
         except Exception as err:  # noqa: BLE001
@@ -80,4 +91,5 @@ def main(sizes):
 
 
 if __name__ == "__main__":
-    main([int(a) for a in sys.argv[1:]] or [128])
+    sizes = [int(a) for a in sys.argv[1:] if a != "--curvature"]
+    main(sizes or [128], curvature="--curvature" in sys.argv)

@@ -9,10 +9,11 @@ from contextlib import contextmanager
 
 __all__ = ["FIRST_RUN_NOTE", "noting_compilation"]
 
-#: Measured on this project's 2-core machine: a fresh cache's first `volseg segment
-#: fuel` took 47.7 CPU-s, the second 2.1 (benchmarks/bench_first_run.py), rounded.
+#: Measured on this project's 2-core machine: a fresh cache's first `volseg demo` took
+#: 36 s, the second 2.0 (benchmarks/bench_first_run.py; 41 s before each operator got
+#: a compiled pass of its own), rounded to a range for slower machines.
 FIRST_RUN_NOTE = ("compiling the numba kernels (first run after an install only, about "
-                  "30-50 s; cached for every later run)")
+                  "25-45 s; cached for every later run)")
 
 
 @contextmanager
