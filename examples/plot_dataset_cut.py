@@ -7,14 +7,11 @@ look at the hierarchy's curve and cut it again at other region counts: every cut
 after the first is a relabelling, nothing is recomputed.
 """
 
-import matplotlib
+import matplotlib.pyplot as plt
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from volseg import segment_volume  # noqa: E402
-from volseg.files import load_volume  # noqa: E402
+from volseg import segment_volume
+from volseg.files import load_volume
 
 volume = load_volume("fuel")        # from ../shared/data/volvis, or the download cache
 result = segment_volume(volume)     # the CLI's defaults: 30 regions by hypervolume

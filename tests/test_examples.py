@@ -21,6 +21,7 @@ def test_every_example_is_listed():
 @pytest.mark.parametrize("script", EXAMPLES, ids=lambda path: path.stem)
 def test_example_runs(script, tmp_path, monkeypatch, volvis_dir, capsys):
     monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("MPLBACKEND", "Agg")     # the examples save figures, show none
     runpy.run_path(str(script), run_name="__main__")
     for name in WRITES[script.name]:
         assert (tmp_path / name).exists(), name

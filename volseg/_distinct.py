@@ -4,19 +4,26 @@
 - `places`: the same, and each value's place among them (``np.unique``'s inverse),
   by a hash table;
 - `is_in`: ``np.isin`` by a sort;
-- `index_type`: int32 for ids and links where they fit, else int64.
+- `index_type`: int32 for ids and links where they fit, else int64;
+- `label_type`: the smallest unsigned type for labels.
 """
 
 import numba
 import numpy as np
 
-__all__ = ["distinct", "places", "is_in", "slot_of", "index_type"]
+__all__ = ["distinct", "places", "is_in", "slot_of", "index_type", "label_type"]
 
 
 def index_type(largest: int):
     """The integer type of an array whose values lie in [-1, `largest`]: int32 where
     `largest` fits it (half the memory to walk), else int64."""
     return np.int32 if largest <= np.iinfo(np.int32).max else np.int64
+
+
+def label_type(largest: int) -> np.dtype:
+    """The smallest unsigned type that holds labels 0..`largest` (what label viewers
+    expect, and a quarter of int32's memory up to 255 regions)."""
+    return np.dtype(np.min_scalar_type(max(int(largest), 1)))
 
 
 def distinct(values) -> np.ndarray:

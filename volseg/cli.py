@@ -492,21 +492,14 @@ def _frame_text(frame) -> str:
 
 
 def _same_grid_or_say(first, other, name: str, any_grid: bool):
-    """Refuse labels (or a mask) whose voxels sit elsewhere than the first labels':
-    a voxel-by-voxel score of two grids compares different places. `any_grid` (a
-    user who knows) compares them anyway, saying so. A file that carries no geometry
-    (a .npy, a raw grid: unit-less voxels of 1 at the origin) and a unit one file does
-    not say are no disagreement."""
+    """Refuse labels (or a mask) whose voxels sit elsewhere than the first labels'
+    (`Frame.agrees_with`): a voxel-by-voxel score of two grids compares different
+    places. `any_grid` (a user who knows) compares them anyway, saying so."""
     import warnings
 
     from .errors import VolsegWarning
 
-    a, b = first.frame, other.frame
-    if any(f.unit is None and np.array_equal(f.affine, np.eye(4)) for f in (a, b)):
-        return
-    if a.unit is None or b.unit is None:
-        a, b = a.with_unit(None), b.with_unit(None)
-    if a.same_grid(b):
+    if first.frame.agrees_with(other.frame):
         return
     what = (f"{name} places its voxels elsewhere than the first labels ("
             f"{_frame_text(other.frame)}, against {_frame_text(first.frame)})")

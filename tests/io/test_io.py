@@ -430,3 +430,19 @@ def test_vts_writes_every_points_world_position_slab_by_slab(tmp_path, monkeypat
         back = vtk_to_numpy(grid.GetPointData().GetArray("v")).reshape(4, 5, 6)
         np.testing.assert_array_equal(back.transpose(2, 1, 0), data)
         assert grid.GetFieldData().GetAbstractArray("unit").GetValue(0) == "micrometer"
+
+
+def test_frames_agree_unless_both_carry_geometry_that_differs():
+    """`Frame.agrees_with`, the rule `volseg compare` applies: a file without geometry
+    (unit-less voxels of 1 at the origin) agrees with any grid; a unit only one frame
+    says is ignored; otherwise voxel sizes, origin and axes must match."""
+    Frame = io.Frame
+    plain = Frame.from_spacing((1.0, 1.0, 1.0))
+    scan = Frame.from_spacing((0.5, 0.5, 2.0), unit="millimeter")
+    assert plain.agrees_with(scan) and scan.agrees_with(plain)
+    assert scan.agrees_with(scan.with_unit(None))
+    assert not scan.agrees_with(Frame.from_spacing((0.5, 0.5, 2.5), unit="millimeter"))
+    assert not scan.agrees_with(scan.with_unit("micrometer"))
+    shifted = np.diag([0.5, 0.5, 2.0, 1.0])
+    shifted[:3, 3] = (1.0, 0.0, 0.0)
+    assert not scan.agrees_with(Frame(shifted, unit="millimeter"))

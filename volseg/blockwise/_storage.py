@@ -42,6 +42,7 @@ import numpy as np
 
 from .. import __version__
 from .._block_hooks import BlockHooks
+from .._distinct import label_type
 from ..errors import OutputError
 from ..fields import GIVEN
 from ..io import Frame, read_zarr, write_zarr
@@ -142,7 +143,7 @@ class BlockwiseStorage(Storage):
         return self._written("curvature", curvature)
 
     def labels(self, labels, n_regions: int):
-        return self._written("labels", labels.astype(np.min_scalar_type(n_regions)))
+        return self._written("labels", labels.astype(label_type(n_regions)))
 
     def _written(self, kind: str, array):
         write_zarr(self.paths[kind], array, frame=self.frame,

@@ -101,6 +101,17 @@ class Frame:
         return self.unit == other.unit and bool(
             np.allclose(self.affine, other.affine, rtol=0, atol=tolerance))
 
+    def agrees_with(self, other: Frame) -> bool:
+        """Whether two files' voxels may be compared one by one: `same_grid`, where a
+        frame that carries no geometry (unit-less voxels of 1 at the origin: a .npy, a
+        raw grid) agrees with any, and a unit that only one of them says is ignored."""
+        a, b = self, other
+        if any(f.unit is None and np.array_equal(f.affine, np.eye(4)) for f in (a, b)):
+            return True
+        if a.unit is None or b.unit is None:
+            a, b = a.with_unit(None), b.with_unit(None)
+        return a.same_grid(b)
+
     @property
     def axis_aligned(self) -> bool:
         """Whether voxel axis i runs along world axis i, forwards: no rotation, no flip

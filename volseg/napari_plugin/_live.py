@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import _validate
+from .._distinct import label_type
 from ..fields import get_field
 from ..segment import Segmentation, SegmentRequest, run_stages, segment_volume
 from ._layers import LayerVolume
@@ -45,11 +46,6 @@ class Options:
     def keywords(self) -> dict:
         return {"operator": self.operator, "smooth_sigma": self.smooth_sigma, "mask": self.mask,
                 "measure": self.measure, "n_regions": self.n_regions, "field": self.field}
-
-
-def labels_dtype(max_label: int) -> np.dtype:
-    """The smallest unsigned type that holds labels 0..`max_label`."""
-    return np.dtype(np.min_scalar_type(max(int(max_label), 1)))
 
 
 class LiveSegmentation:
@@ -86,8 +82,7 @@ class LiveSegmentation:
             result = segment_volume(volume, **self.options.keywords(), progress=say)
             # The layer's labels in the smallest type that holds every cut's labels (a
             # quarter of int32's texture at most 255 regions); the cuts write into them.
-            self.result = result
-            buffer = np.empty(result.labels.shape, labels_dtype(self.max_regions()))
+            buffer = np.empty(result.labels.shape, label_type(self.max_regions(result)))
             buffer[...] = result.labels
             self.result = dataclasses.replace(result, labels=buffer)
         if self.options.measure is None:       # the field's rule chose it
@@ -167,10 +162,11 @@ class LiveSegmentation:
     def curvature(self):
         return self.source.shown(self.result.curvature)
 
-    def curve(self) -> tuple:
+    def curve(self, result: Segmentation | None = None) -> tuple:
         """(thresholds, counts): the region count (``counts[i]``) of the cut just below
-        each extinction of the measure (``thresholds``, decreasing, positive)."""
-        result = self.result
+        each extinction of the measure (``thresholds``, decreasing, positive), of
+        `result` (default the current one)."""
+        result = self.result if result is None else result
         key = (id(result.hierarchy), result.measure, result.cut.get("min_component", 0.0))
         if self._curve is None or self._curve[0] != key:
             extinction, components = result.hierarchy.curve(*key[1:])
@@ -178,10 +174,12 @@ class LiveSegmentation:
             self._curve = key, (extinction, components + np.arange(1, len(extinction) + 1))
         return self._curve[1]
 
-    def max_regions(self) -> int:
-        """The most regions a cut can have (every maximum kept)."""
-        thresholds, counts = self.curve()
-        return int(counts[-1]) if len(counts) else max(int(self.result.n_regions), 1)
+    def max_regions(self, result: Segmentation | None = None) -> int:
+        """The most regions a cut of `result` (default the current one) can have
+        (every maximum kept)."""
+        result = self.result if result is None else result
+        thresholds, counts = self.curve(result)
+        return int(counts[-1]) if len(counts) else max(int(result.n_regions), 1)
 
     def region(self, label: int) -> dict:
         return self.result.region(label)

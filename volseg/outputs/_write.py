@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import _json
+from .._distinct import label_type
 from ..io import Frame, OutputSet, write_ngff, write_volume, write_vti, write_vts, write_zarr
 
 __all__ = ["write_result_files", "write_segmentation"]
@@ -32,10 +33,9 @@ def write_result_files(paths: dict, result, values, info: dict, *, frame: Frame 
 
     frame = frame or Frame.from_spacing(result.spacing)
     k = int(result.n_regions)
-    label_type = np.min_scalar_type(max(k, 0))
     # Cast once, for every writer that takes them (NIfTI, Zarr, NGFF, ParaView); lazy
     # arrays stay lazy.
-    arrays = {"labels": result.labels.astype(label_type),
+    arrays = {"labels": result.labels.astype(label_type(k)),
               "curvature": result.curvature.astype(np.float32)}
     curve = (result.report.curve, result.report.curve.n_components, result.threshold)
     # The writers run at once (zlib releases the GIL).
