@@ -11,6 +11,8 @@ section 9): no path enters them and they reach no maximum (`OUTSIDE`).
 import numba
 import numpy as np
 
+from .._kernels import UNROLLED
+
 #: `ascend`'s result for a voxel whose steepest path leaves the block: -1 - gid of the
 #: first voxel outside (always on a neighbouring block's outer layer).
 EXIT = -1
@@ -23,7 +25,6 @@ def _gid(i, j, k, origin, shape):
     return ((origin[0] + i) * shape[1] + (origin[1] + j)) * shape[2] + (origin[2] + k)
 
 
-@numba.njit(cache=True, nogil=True)
 def ascend(halo, origin, shape, offsets, result):
     """result[i, j, k] for each owned voxel: the gid of the maximum its steepest ascent
     reaches inside the block, or -1 - gid of the first voxel outside the block on it,
@@ -35,32 +36,49 @@ def ascend(halo, origin, shape, offsets, result):
 
     The halo's flat index orders its voxels as their gids do (both are C order, and
     the halo's voxels outside the volume are -inf, never chosen), so a tie is broken
-    by the neighbours' flat steps and no gid is computed but an exit's or a maximum's:
-    0.12 s per 128^3 block against 0.20 s with a gid per neighbour.
+    by the neighbours' flat steps and no gid is computed but an exit's or a maximum's.
+    The steepest neighbours are found by a parallel kernel (`_steepest`; under the
+    blockwise engine it runs on its task's one thread: numba compiles a parallel
+    loop's body without the serial loop's reloads, 3.7x faster on a 128^3 block),
+    then the paths are followed serially (`_resolve`).
     """
     a, b, c = result.shape
-    n = a * b * c
     hb, hc = b + 2, c + 2
-    flat = halo.reshape(-1)
     m = offsets.shape[0]
-    steps = np.empty(m, dtype=np.int64)
-    for t in range(m):
-        steps[t] = (offsets[t, 0] * hb + offsets[t, 1]) * hc + offsets[t, 2]
-    up = np.empty(n, dtype=np.int64)       # local index, or -1 - gid when outside
-    for i in range(a):
+    steps = np.zeros(max(m, UNROLLED), dtype=np.int64)   # padded by 0: the voxel itself
+    steps[:m] = (offsets[:, 0] * hb + offsets[:, 1]) * hc + offsets[:, 2]
+    up = np.empty(a * b * c, dtype=np.int64)       # local index, or -1 - gid when outside
+    _steepest(halo.reshape(-1), (a, b, c), origin, shape, offsets, steps, m <= UNROLLED, up)
+    _resolve(halo.reshape(-1), (a, b, c), origin, shape, up, result.reshape(-1))
+
+
+@numba.njit(cache=True, parallel=True)
+def _steepest(flat, block, origin, shape, offsets, steps, unrolled, up):
+    """up[own]: the local index of the steepest neighbour inside the block, -1 - gid
+    of one outside it, or `own` itself (a maximum, or outside the mask: no one climbs
+    to it). `steps` padded by 0 to `UNROLLED` when `unrolled` (a loop of known length)."""
+    a, b, c = block
+    hb, hc = b + 2, c + 2
+    for i in numba.prange(a):
         for j in range(b):
             row, halo_row = (i * b + j) * c, ((i + 1) * hb + (j + 1)) * hc + 1
             for k in range(c):
                 own, h = row + k, halo_row + k
                 best_v = flat[h]
-                up[own] = own             # a maximum, or outside the mask: no one climbs
-                if best_v == -np.inf:     # to it (relabelled OUTSIDE below)
+                up[own] = own
+                if best_v == -np.inf:
                     continue
                 best_s, best_t = 0, -1
-                for t in range(m):
-                    value = flat[h + steps[t]]
-                    if value > best_v or (value == best_v and steps[t] > best_s):
-                        best_v, best_s, best_t = value, steps[t], t
+                if unrolled:
+                    for t in range(UNROLLED):
+                        value = flat[h + steps[t]]
+                        if value >= best_v and (value > best_v or steps[t] > best_s):
+                            best_v, best_s, best_t = value, steps[t], t
+                else:
+                    for t in range(len(steps)):
+                        value = flat[h + steps[t]]
+                        if value >= best_v and (value > best_v or steps[t] > best_s):
+                            best_v, best_s, best_t = value, steps[t], t
                 if best_t < 0:
                     continue
                 bi, bj, bk = i + offsets[best_t, 0], j + offsets[best_t, 1], k + offsets[best_t, 2]
@@ -68,7 +86,15 @@ def ascend(halo, origin, shape, offsets, result):
                     up[own] = (bi * b + bj) * c + bk
                 else:
                     up[own] = -1 - _gid(bi, bj, bk, origin, shape)
-    final = result.reshape(-1)
+
+
+@numba.njit(cache=True, nogil=True)
+def _resolve(flat, block, origin, shape, up, final):
+    """final[own] from `up` (`_steepest`): each path followed to its maximum or exit,
+    every voxel on it answered at once; `OUTSIDE` for the voxels of value -inf."""
+    a, b, c = block
+    hb, hc = b + 2, c + 2
+    n = a * b * c
     unknown = np.iinfo(np.int64).min
     final[:] = unknown
     for v in range(n):
