@@ -86,7 +86,9 @@ def grid_kernel(fp, h, operator, tables, acc, first_parity=0):
 
     Each operator has a compiled pass of its own, chosen here: a first run compiles
     only the operator it uses (one pass for all four compiled every stencil, 9 of
-    the 38 CPU-s a first `volseg segment` spent compiling).
+    the 38 CPU-s a first `volseg segment` spent compiling). Four passes of the same
+    shape rather than one taking its slab function as an argument: numba caches no
+    function that takes another (it compiled again on every run).
     """
     _PASSES[operator](fp, h, tables, acc, first_parity)
 

@@ -26,9 +26,9 @@ def _higher(values, u, v):
 
 
 #: Grid neighbourhoods of at most this many offsets are walked by a loop of exactly
-#: this length (`unrolled`: the offsets padded by 0, the vertex itself, which is never
-#: higher than the best so far and never in another cell): a loop of known length is
-#: unrolled, 4x faster steepest ascent at 256^3 (Kuhn's 14 offsets).
+#: this length (`unrolled`: the offsets padded by 0, the vertex itself, which never
+#: wins against the best so far): a loop of known length is unrolled, 4x faster
+#: steepest ascent at 256^3 (Kuhn's 14 offsets).
 UNROLLED = 16
 
 
@@ -79,6 +79,7 @@ def steepest_ascent_unrolled(values, vertices, offsets, up):
 
 @numba.njit(cache=True, nogil=True)
 def _resolve_run(vertices, up, cell, lo, hi):
+    """`resolve_cells` for vertices[lo:hi]."""
     for n in range(lo, hi):
         v = vertices[n]
         root = v
