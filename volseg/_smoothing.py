@@ -19,17 +19,25 @@ __all__ = ["gaussian", "noise_sigma"]
 #: `noise_sigma` reads at most about this many 2x2x2 cells (a lattice of them).
 NOISE_SAMPLE_CELLS = 2_000_000
 
+#: Float types scipy's filters read as they are (integers are read as they are too).
+_READ_AS_IS = (np.dtype(np.float32), np.dtype(np.float64))
+
 #: scipy.ndimage.gaussian_filter's default truncation, in standard deviations.
 TRUNCATE = 4.0
 
 
-def gaussian(data, sigma: float):
+def gaussian(data, sigma: float, *, margin: int = 0):
     """`data` (numpy or Dask, any dimension) smoothed by a Gaussian of `sigma` voxels,
-    as float64; `sigma` 0 returns it unchanged."""
+    as float64; `sigma` 0 returns it unchanged. `margin`: a numpy result is the
+    interior of a buffer `margin` voxels wider on every side (its margin unset), for a
+    stage that pads it in place (`volseg.curvature.checked_grid_curvature`)."""
     if not sigma:
         return data
     if not hasattr(data, "map_overlap"):
-        return _filter(data, sigma)
+        data = np.asarray(data)
+        buffer = np.empty(tuple(n + 2 * margin for n in data.shape))
+        out = buffer[tuple(slice(margin, n + margin) for n in data.shape)] if margin else buffer
+        return _filter(data, sigma, out)
     radius = int(TRUNCATE * float(sigma) + 0.5)
     chunks = data.chunks
     # An axis shorter than the halo is one block (Dask cannot cut a halo deeper than
@@ -46,13 +54,20 @@ def gaussian(data, sigma: float):
     return out if out.chunks == chunks else out.rechunk(chunks)
 
 
-def _filter(block, sigma):
-    """scipy's `gaussian_filter` of the float64 values, 'nearest' at the edges (the
-    whole volume in memory, or a block with its halo)."""
+def _filter(block, sigma, out=None):
+    """scipy's `gaussian_filter` of the values in float64, 'nearest' at the edges (the
+    whole volume in memory, or a block with its halo), into `out` if given. The block is
+    passed as it is: scipy reads each line into float64 itself, so an integer volume
+    needs no float64 copy beside the result (the same numbers: tested)."""
     from scipy.ndimage import gaussian_filter
 
-    return gaussian_filter(np.asarray(block, dtype=np.float64), sigma, mode="nearest",
-                           truncate=TRUNCATE)
+    block = np.asarray(block)
+    if block.dtype.kind not in "iu" and block.dtype not in _READ_AS_IS:
+        block = block.astype(np.float64)          # float16 and others scipy refuses
+    if out is None:
+        out = np.empty(block.shape)
+    gaussian_filter(block, sigma, output=out, mode="nearest", truncate=TRUNCATE)
+    return out
 
 
 def noise_sigma(data, mask=None) -> float:

@@ -44,8 +44,11 @@ __all__ = ["Field", "FIELD_REGISTRY", "FIELDS", "get_field", "field_entry", "giv
 class Field:
     """A field the Morse complex can be built on.
 
-    `make(values, span, request, scale, hooks, mask)` gives the field as a user sees it
-    (numpy in, numpy out; Dask in, lazy Dask out, equal to numpy's exactly); the
+    `make(values, span, request, scale, hooks, mask, owned)` gives the field as a user
+    sees it (numpy in, numpy out; Dask in, lazy Dask out, equal to numpy's exactly);
+    `owned`: `values` are the stages' own copy (the smoothed volume, the interior of a
+    buffer with a 1-voxel margin: `volseg._smoothing.gaussian`), which `make` may
+    overwrite (the curvature scales and pads it in place: 8 bytes a voxel less); the
     complex is built on ``sign * field``. `halo`: the voxels of halo a block needs.
     `needs_scale`: the field reads the graph's value scale (the curvature). `measure`:
     the cut measure by default (`volseg.morse.MEASURE_REGISTRY`), chosen by measurement
@@ -129,18 +132,18 @@ def _gradient_block(block, mask=None, *, spacing):
     return np.sqrt(squares)
 
 
-def _curvature(values, span, request, scale, hooks, mask=None):
+def _curvature(values, span, request, scale, hooks, mask=None, owned=False):
     from .curvature import checked_grid_curvature
 
     return checked_grid_curvature(values, request.operator, request.spacing, scale,
-                                  request.padding, block_hooks=hooks)
+                                  request.padding, block_hooks=hooks, owned=owned)
 
 
-def _gradient(values, span, request, scale, hooks, mask=None):
+def _gradient(values, span, request, scale, hooks, mask=None, owned=False):
     return gradient_magnitude(normalised(values, span), request.spacing, mask)
 
 
-def _value(values, span, request, scale, hooks, mask=None):
+def _value(values, span, request, scale, hooks, mask=None, owned=False):
     low, high = (float(v) for v in span)
     if low < 0 < high:                      # a signed map: bright and dark blobs
         field = abs(values) if _validate.is_lazy(values) else np.abs(values)
@@ -169,7 +172,7 @@ def get_field(field: str | Field) -> Field:
 
 def given(array) -> Field:
     """The entry of a field the user computed: the complex built on `array` itself."""
-    def make(values, span, request, scale, hooks, mask=None):
+    def make(values, span, request, scale, hooks, mask=None, owned=False):
         return array
 
     return Field(GIVEN, "given field", (), make, 1.0, 0, False, "hypervolume",

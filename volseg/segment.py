@@ -471,14 +471,20 @@ def run_stages(data, request: SegmentRequest, storage: Storage | None = None, *,
     timings = {}
     entry = request.field
     with _timed(timings, "curvature", storage):
-        values = storage.smoothed(gaussian(data, request.smooth_sigma))
+        lazy = _validate.is_lazy(data)
+        values = storage.smoothed(gaussian(data, request.smooth_sigma, margin=0 if lazy else 1))
         scale = request.value_scale
         if scale is None and entry.needs_scale:
             scale = _default_scale(values, request, shifted_range, source)
-        field = entry.make(values, shifted_range, request, scale, hooks, choice.mask)
+        # A smoothed copy in memory is the stages' own: the field may overwrite it.
+        field = entry.make(values, shifted_range, request, scale, hooks, choice.mask,
+                           owned=values is not data and not lazy)
         if entry.name == GIVEN:                 # the user's array: checked here, once
             field = _checked_given(field, data)
         field = storage.curvature(field)
+    # The Morse stage needs the field alone: the smoothed and lattice copies (8 bytes
+    # per voxel each) are let go before its own arrays are made.
+    del values, data
     hierarchy, labels, report = _morse_and_cut(
         for_morse(entry, field), request.cut, timings, mask=choice.mask, storage=storage,
         vertex_weight=float(np.prod(request.spacing)))

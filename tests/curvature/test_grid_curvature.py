@@ -107,3 +107,54 @@ def test_memory_layout_does_not_change_the_result(layout, rng):
     else:
         other, expected = field.astype(np.float32), grid_curvature(field.astype(np.float32))
     assert np.array_equal(grid_curvature(other, "weighted"), expected)
+
+
+@pytest.mark.parametrize("shape", [(6, 7, 5), (1, 4, 3), (2, 1, 5), (3, 2, 1)])
+@pytest.mark.parametrize("padding", ["linear", "mirror"])
+def test_padding_in_place_is_numpys_padding_bit_for_bit(shape, padding, rng):
+    """The margin filled in place (the stages' own smoothed buffer) holds what np.pad
+    writes, corners and one-voxel axes included."""
+    from volseg.curvature._grid import _PADDING, pad_in_place
+
+    f = rng.standard_normal(shape) * 10.0 ** rng.integers(-8, 8, shape)
+    fp = np.full(tuple(n + 2 for n in shape), np.nan)
+    fp[INNER] = f
+    pad_in_place(fp, padding)
+    assert np.array_equal(fp, np.pad(f, 1, **_PADDING[padding]))
+
+
+@pytest.mark.parametrize("operator", ALL)
+@pytest.mark.parametrize("padding", ["linear", "mirror"])
+def test_an_owned_smoothed_buffer_gives_the_same_curvature(operator, padding, rng):
+    """Curvature of the stages' smoothed copy, scaled, padded and overwritten in place
+    (`owned`), equals the one of a copy, bit for bit; a view that is not a margin
+    buffer's interior is copied as before."""
+    from volseg._smoothing import gaussian
+    from volseg.curvature import checked_grid_curvature, get_operator
+
+    volume = (255 * rng.random((13, 11, 9))).astype(np.uint8)
+    entry, h = get_operator(operator), (0.7, 1.0, 1.3)
+    expected = checked_grid_curvature(gaussian(volume, 1.0), entry, h, 0.3, padding)
+    owned = gaussian(volume, 1.0, margin=1)
+    assert owned.base.shape == (15, 13, 11)
+    result = checked_grid_curvature(owned, entry, h, 0.3, padding, owned=True)
+    assert np.array_equal(result, expected)
+    assert result.flags.c_contiguous
+    other = np.zeros((13, 11, 9, 2))[..., 0]                  # strided, no margin
+    other[...] = gaussian(volume, 1.0)
+    assert np.array_equal(checked_grid_curvature(other, entry, h, 0.3, padding, owned=True),
+                          expected)
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.int16, np.uint64, np.float16, np.float32])
+def test_smoothing_reads_any_type_as_its_float64_copy_would(dtype, rng):
+    """scipy's filter is given the volume as it is (no float64 copy beside the result):
+    the numbers of the filter of its float64 copy, with or without a margin."""
+    from scipy.ndimage import gaussian_filter
+
+    from volseg._smoothing import gaussian
+
+    volume = (200 * rng.random((12, 9, 14))).astype(dtype)
+    expected = gaussian_filter(volume.astype(np.float64), 1.3, mode="nearest", truncate=4.0)
+    for margin in (0, 1):
+        assert np.array_equal(gaussian(volume, 1.3, margin=margin), expected)
