@@ -62,3 +62,23 @@ def test_the_saddle_order_is_the_strict_order(seed, n_cells, n_edges, n_values):
     some = np.flatnonzero(np.random.default_rng(seed).random(len(keys)) < 0.5)
     expected = some[np.lexsort((b[some], a[some], saddle[some], keys[some]))]
     assert _saddle_order(keys, saddle, a, b, some).tolist() == expected.tolist()
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2**31), st.integers(1, 40), st.integers(1, 400))
+def test_grouping_read_off_the_cells_is_the_grouping_by_the_vertex_list(seed, n_cells, n):
+    """The in-memory build groups vertices by cell from `cell` alone (its vertices are
+    the nodes with a cell), after freeing the vertex list: the same starts and members
+    as the grouping that walks the list."""
+    from volseg.morse import _kernels
+
+    rng = np.random.default_rng(seed)
+    cell = np.full(n, -1, dtype=np.int32)
+    vertices = np.flatnonzero(rng.random(n) < 0.7).astype(np.int32)
+    cell[vertices] = rng.integers(0, n_cells, len(vertices))
+    expected = [np.empty(n_cells + 1, np.int64), np.empty(len(vertices), np.int32)]
+    _kernels.group_by_cell(vertices, cell, n_cells, *expected)
+    got = [np.empty(n_cells + 1, np.int64), np.empty(len(vertices), np.int32)]
+    _kernels.group_by_cell_of_nodes(cell, n_cells, *got)
+    for one, other in zip(expected, got, strict=True):
+        np.testing.assert_array_equal(one, other)

@@ -23,24 +23,24 @@ def _descending_cells(graph: _Neighbourhood, phases: _Phases):
     """(cell per node, -1 off the vertices; maxima nodes by decreasing value): cell[v] is
     the id of the maximum v's steepest ascent reaches."""
     index = index_type(len(graph.values) + 1)
-    up = np.empty(len(graph.values), dtype=index)
-    if graph.grid and len(graph.offsets) <= kernels.UNROLLED:
-        kernels.steepest_ascent_unrolled(graph.values, graph.vertices,
-                                         kernels.unrolled(graph.offsets), up)
+    # One node-sized array, `up`, becomes the cells in place (4-8 bytes a voxel less
+    # than a second one): -1 off the vertices, the ascent's step, the root, the id.
+    up = np.full(len(graph.values), -1, dtype=index)
+    steps, fixed = kernels.unrolled(graph.offsets)
+    if graph.grid and fixed:
+        kernels.steepest_ascent_unrolled(graph.values, graph.vertices, steps, up)
     else:
         kernels.steepest_ascent(graph.values, graph.vertices, graph.grid, graph.offsets,
                                 graph.indptr, graph.indices, up)
     phases.done("steepest ascent")
-    cell = np.full(len(graph.values), -1, dtype=index)
-    kernels.resolve_cells(graph.vertices, up, cell)
+    kernels.resolve_cells(graph.vertices, up, up)     # up[v] = its root, compressed
     phases.done("path compression")
     maxima = kernels.roots(graph.vertices, up)
     # Maximum ids by decreasing value (simulation of simplicity: then by index).
     maxima = maxima[np.lexsort((maxima, graph.values[maxima]))[::-1]]
-    up[maxima] = np.arange(len(maxima), dtype=index)  # up is free now: root -> id
-    kernels.relabel(graph.vertices, cell, up)
+    kernels.relabel_roots(graph.vertices, up, maxima)
     phases.done("maxima order and relabel")
-    return cell, maxima
+    return up, maxima
 
 
 @dataclass
@@ -61,7 +61,7 @@ def _merge_events(graph: _Neighbourhood, cell, n_maxima,
     """One edge per pair of adjacent cells (its highest saddle); the maximum spanning
     forest of them in the order (saddle value, saddle vertex, pair), then one Kruskal
     over its edges from the highest saddle down."""
-    edge_a, edge_b, edge_v = _cross_edges(graph, cell, n_maxima)
+    edge_a, edge_b, edge_v = _cross_edges(graph, cell, n_maxima, cells_mark_vertices=True)
     phases.done("cross-cell edges")
     # Only the cell graph's maximum spanning forest can merge two components.
     keys = graph.values[edge_v]

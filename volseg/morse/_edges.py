@@ -14,8 +14,11 @@ __all__ = []
 _CHUNK_VERTICES = 1 << 20
 
 
-def _cross_edges(graph, cell, n_cells):
+def _cross_edges(graph, cell, n_cells, *, cells_mark_vertices=False):
     """(a, b, saddle) of every pair of adjacent cells, a < b, with its highest saddle.
+    `cells_mark_vertices`: the vertices are exactly the nodes whose cell is not -1 (in
+    memory; a block's halo nodes have cells too), so the grouping reads `cell` alone
+    and the vertex list is freed before it (4 bytes a voxel off the build's peak).
 
     The vertices are grouped by cell (a counting sort), then each cell's edges to
     cells with a larger id are reduced to one per partner: exactly one edge per pair,
@@ -29,10 +32,15 @@ def _cross_edges(graph, cell, n_cells):
     """
     flat, grid, offsets, indptr, indices = (graph.values, graph.grid, graph.offsets,
                                             graph.indptr, graph.indices)
-    n_real = len(graph.vertices)
+    n_real, index = len(graph.vertices), graph.vertices.dtype
     starts = np.empty(n_cells + 1, dtype=np.int64)
-    members = np.empty(n_real, dtype=graph.vertices.dtype)
-    _kernels.group_by_cell(graph.vertices, cell, n_cells, starts, members)
+    if cells_mark_vertices:
+        graph.vertices = None
+        members = np.empty(n_real, dtype=index)
+        _kernels.group_by_cell_of_nodes(cell, n_cells, starts, members)
+    else:
+        members = np.empty(n_real, dtype=index)
+        _kernels.group_by_cell(graph.vertices, cell, n_cells, starts, members)
     graph.vertices = None  # members hold every vertex now: 4 bytes per voxel less at the peak
     # Cells in the order of their first vertex, so that the walk moves through memory.
     # (A cell may have no vertex: the blockwise pass's cells seen only in a block's halo.)

@@ -173,8 +173,11 @@ def _neighbourhood(values, mask, adjacency, connectivity) -> _Neighbourhood:
         vertices = np.arange(values.size, dtype=np.int64) if mask is None else np.flatnonzero(mask)
         return _Neighbourhood(values, vertices, False, empty, indptr, indices, None)
     steps = grid_offsets(values.ndim, connectivity)
-    padded = np.pad(values if mask is None else np.where(mask, values, -np.inf), 1,
-                    constant_values=-np.inf)
+    # -inf around the grid and, with a mask, at every vertex outside it: written into
+    # the padded array directly, no full-size temporary on the way.
+    padded = np.full(tuple(n + 2 for n in values.shape), -np.inf)
+    np.copyto(padded[(slice(1, -1),) * values.ndim], values,
+              where=True if mask is None else mask)
     strides = np.array([s // padded.itemsize for s in padded.strides], dtype=np.int64)
     index = index_type(padded.size + 1)
     node = np.zeros((1,) * values.ndim, dtype=index)

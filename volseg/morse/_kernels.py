@@ -32,13 +32,15 @@ def _higher(values, u, v):
 UNROLLED = 16
 
 
-def unrolled(offsets) -> np.ndarray:
-    """`offsets` (flat, int64) padded to `UNROLLED` entries by 0, or as they are if
-    longer (18 and 26 neighbours take the loop of unknown length)."""
+def unrolled(offsets) -> tuple[np.ndarray, bool]:
+    """(steps, whether the loop over them is of the known length `UNROLLED`): `offsets`
+    (flat, int64) padded to `UNROLLED` entries by 0 (the vertex itself, which never
+    wins), or as they are if longer (18 and 26 neighbours take the loop of unknown
+    length). The one place that choice is made, for both ascents."""
     offsets = np.asarray(offsets, dtype=np.int64)
     if len(offsets) > UNROLLED:
-        return offsets
-    return np.concatenate([offsets, np.zeros(UNROLLED - len(offsets), dtype=np.int64)])
+        return offsets, False
+    return np.concatenate([offsets, np.zeros(UNROLLED - len(offsets), dtype=np.int64)]), True
 
 
 @numba.njit(cache=True, parallel=True)
@@ -100,21 +102,29 @@ _RESOLVE_RUNS = 64
 @numba.njit(cache=True, parallel=True)
 def resolve_cells(vertices, up, cell):
     """cell[v] = the maximum reached from v by following `up`, with path compression,
-    in parallel runs of vertices. Two runs may compress the same path at once: each
-    writes into up[x] only the one root x's path reaches, and never into a root, so
-    every order of the writes leaves every path leading to its own root: the same
-    cells and the same maxima (`roots`)."""
+    in parallel runs of vertices (`cell` may be `up` itself: it then holds the roots).
+    Two runs may compress the same path at once: each writes into up[x] only the one
+    root x's path reaches, and never into a root, so every order of the writes leaves
+    every path leading to its own root: the same cells and the same maxima (`roots`)."""
     n = len(vertices)
     for r in numba.prange(_RESOLVE_RUNS):
         _resolve_run(vertices, up, cell, n * r // _RESOLVE_RUNS, n * (r + 1) // _RESOLVE_RUNS)
 
 
 @numba.njit(cache=True, parallel=True)
-def relabel(vertices, cell, ids):
-    """cell[v] = ids[cell[v]] (root vertex -> maximum id)."""
+def relabel_roots(vertices, cell, maxima):
+    """cell[v] = i for every vertex v whose root (`cell[v]`, fully compressed) is
+    maxima[i], in place: the roots hold -(i + 1) while the others read them (a root's
+    own entry is rewritten last), so no root -> id table of the nodes' size."""
+    for i in numba.prange(len(maxima)):
+        cell[maxima[i]] = -(i + 1)
     for n in numba.prange(len(vertices)):
         v = vertices[n]
-        cell[v] = ids[cell[v]]
+        root = cell[v]
+        if root >= 0:
+            cell[v] = -cell[root] - 1
+    for i in numba.prange(len(maxima)):
+        cell[maxima[i]] = i
 
 
 @numba.njit(cache=True, parallel=True)
@@ -292,6 +302,25 @@ def break_ties(order, values, saddle, edge_a, edge_b):
                 order[j + 1] = item
         start = stop
     return long_runs[:n_long]
+
+
+@numba.njit(cache=True, nogil=True)
+def group_by_cell_of_nodes(cell, n_cells, starts, members):
+    """`group_by_cell` when the vertices are exactly the nodes with a cell (cell >= 0):
+    the same members, read off `cell` alone, so the vertex list can be freed first."""
+    for c in range(n_cells + 1):
+        starts[c] = 0
+    for v in range(len(cell)):
+        if cell[v] >= 0:
+            starts[cell[v] + 1] += 1
+    for c in range(n_cells):
+        starts[c + 1] += starts[c]
+    fill = starts[:-1].copy()
+    for v in range(len(cell)):
+        c = cell[v]
+        if c >= 0:
+            members[fill[c]] = v
+            fill[c] += 1
 
 
 @numba.njit(cache=True, nogil=True)

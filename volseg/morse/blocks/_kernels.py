@@ -11,7 +11,7 @@ section 9): no path enters them and they reach no maximum (`OUTSIDE`).
 import numba
 import numpy as np
 
-from .._kernels import UNROLLED
+from .._kernels import UNROLLED, unrolled
 
 #: `ascend`'s result for a voxel whose steepest path leaves the block: -1 - gid of the
 #: first voxel outside (always on a neighbouring block's outer layer).
@@ -44,11 +44,9 @@ def ascend(halo, origin, shape, offsets, result):
     """
     a, b, c = result.shape
     hb, hc = b + 2, c + 2
-    m = offsets.shape[0]
-    steps = np.zeros(max(m, UNROLLED), dtype=np.int64)   # padded by 0: the voxel itself
-    steps[:m] = (offsets[:, 0] * hb + offsets[:, 1]) * hc + offsets[:, 2]
+    steps, fixed = unrolled((offsets[:, 0] * hb + offsets[:, 1]) * hc + offsets[:, 2])
     up = np.empty(a * b * c, dtype=np.int64)       # local index, or -1 - gid when outside
-    _steepest(halo.reshape(-1), (a, b, c), origin, shape, offsets, steps, m <= UNROLLED, up)
+    _steepest(halo.reshape(-1), (a, b, c), origin, shape, offsets, steps, fixed, up)
     _resolve(halo.reshape(-1), (a, b, c), origin, shape, up, result.reshape(-1))
 
 
