@@ -2,12 +2,13 @@
 every NGFF viewer: the curvature as a multiscale image, the labels as its NGFF labels
 image ``labels/regions``, axes z, y, x, the input's voxel sizes, origin and unit.
 
-The metadata and the arrays are written by ome-zarr-py (the NGFF reference
-implementation, which napari-ome-zarr reads with), from pyramids made here lazily:
+The metadata are written as ome-zarr-py (the NGFF reference implementation, which
+napari-ome-zarr reads with) writes them, the arrays by Zarr, from pyramids made here:
 labels by nearest sampling (every second voxel: labels are never blended, and the
 level's voxel centres stay on level 0's), the curvature by 2 x 2 x 2 means (its
 translation moved half a voxel, as NGFF wants). A Dask input is never whole in memory:
-each level is written block by block from the one above.
+each level is written block by block from the one above; a numpy input's level 0 is
+transposed one slab at a time, and the levels below are made from the slabs.
 
 NGFF 0.5 has scale and translation only: a rotated or flipped frame is written axis
 aligned (voxel sizes and the origin); the NIfTI and ``.vti`` outputs keep the rotation.
@@ -126,6 +127,38 @@ def _chunks(shape) -> tuple:
     return tuple(min(NGFF_CHUNK, max(int(n), 1)) for n in shape)
 
 
+def _array(group, name, axes, data=None, *, shape=None, dtype=None):
+    """`group`'s array `name` (z, y, x) in NGFF chunks: holding `data` (numpy), or
+    empty of `shape` and `dtype` for its chunks to be written."""
+    spec = {"data": data} if data is not None else {"shape": shape, "dtype": dtype}
+    return group.create_array(name, chunks=_chunks(spec.get("shape", np.shape(data))),
+                              dimension_names=[a["name"] for a in axes],
+                              config=STORAGE["config"], **spec)
+
+
+def _level0_in_slabs(group, array, dtype, axes, below):
+    """An (X, Y, Z) numpy `array` written as `group`'s level ``s0`` (z, y, x, of
+    `dtype`) one chunk-thick z slab at a time, so that only a slab is ever copied
+    transposed (the whole level's copy was 5 bytes a voxel beside everything the
+    writers hold); returns the level below made from the slabs by `below` (their
+    starts are even, so each 2 x 2 x 2 block lies in one slab), or None."""
+    shape = array.shape[::-1]
+    level = _array(group, "s0", axes, shape=shape, dtype=dtype)
+    parts = []
+    for start in range(0, shape[0], NGFF_CHUNK):
+        slab = np.ascontiguousarray(array[:, :, start:start + NGFF_CHUNK].transpose(2, 1, 0),
+                                    dtype=dtype)
+        level[start:start + len(slab)] = slab
+        if below is not None:
+            parts.append(below(slab))
+    return np.concatenate(parts) if below is not None else None
+
+
+def _sampled(level):
+    """A labels level below `level` (numpy): every second voxel."""
+    return np.ascontiguousarray(level[::2, ::2, ::2])
+
+
 def _coarsened(level):
     """A mean level below `level` (numpy, float32): each 2x2x2 block's mean in float64,
     rounded once, the excess edge voxels dropped; what ``dask.array.coarsen(_mean64,
@@ -173,14 +206,9 @@ def write_ngff(path, labels, curvature, frame: Frame, name: str = "curvature") -
             mean_levels.append(_in_write_blocks(da.coarsen(
                 _mean64, mean_levels[-1], {0: 2, 1: 2, 2: 2}, trim_excess=True)
                 .astype(np.float32)))
+        levels = len(label_levels) - 1
     else:
-        label_levels = [np.ascontiguousarray(np.asarray(labels).transpose(2, 1, 0))]
-        mean_levels = [np.ascontiguousarray(np.asarray(curvature).transpose(2, 1, 0),
-                                            dtype=np.float32)]
-        for _ in range(pyramid_levels(label_levels[0].shape)):
-            label_levels.append(np.ascontiguousarray(label_levels[-1][::2, ::2, ::2]))
-            mean_levels.append(_coarsened(mean_levels[-1]))
-    levels = len(label_levels) - 1
+        levels = pyramid_levels(labels.shape[::-1])
     # Level i's voxel size is 2^i of level 0's; nearest sampling keeps level 0's first
     # voxel centre, a 2^i mean's centre is (2^i - 1) / 2 voxels further.
     label_transforms = [_transforms(spacing * 2**i, origin) for i in range(levels + 1)]
@@ -194,11 +222,15 @@ def write_ngff(path, labels, curvature, frame: Frame, name: str = "curvature") -
         dask.compute(*_written_levels(mean_levels, root, axes),
                      *_written_levels(label_levels, regions, axes))
     else:
-        for group, written in ((root, mean_levels), (regions, label_levels)):
-            for i, level in enumerate(written):
-                group.create_array(f"s{i}", data=level, chunks=_chunks(level.shape),
-                                   dimension_names=[a["name"] for a in axes],
-                                   config=STORAGE["config"])
+        for group, array, dtype, below in (
+                (root, curvature, np.float32, _coarsened),
+                (regions, labels, np.asarray(labels).dtype, _sampled)):
+            level = _level0_in_slabs(group, np.asarray(array), dtype, axes,
+                                     below if levels else None)
+            for i in range(1, levels + 1):
+                _array(group, f"s{i}", axes, level)
+                if i < levels:
+                    level = below(level)
     _multiscales(root, mean_transforms, axes, name)
     _multiscales(regions, label_transforms, axes, "regions", image_label=True)
     root["labels"].attrs["ome"] = {"version": "0.5", "labels": ["regions"]}

@@ -38,7 +38,8 @@ def write_result_files(paths: dict, result, values, info: dict, *, frame: Frame 
     arrays = {"labels": result.labels.astype(label_type(k)),
               "curvature": result.curvature.astype(np.float32)}
     curve = (result.report.curve, result.report.curve.n_components, result.threshold)
-    # The writers run at once (zlib releases the GIL).
+    # The writers run at once: ISA-L's gzip releases the GIL while it compresses (two
+    # threads each writing 32 MB of float32 took 0.55-0.75 of the serial time).
     with ThreadPoolExecutor(3) as pool:
         jobs = [pool.submit(_write_array, Path(paths[key]), arrays[kind], frame, kind,
                             _description(kind, result))
