@@ -30,6 +30,16 @@ def in_fresh_process(code: str) -> dict:
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
+def run_filled(code: str, **fields):
+    """Run `code` with `fields` filled in (``str.format``) in a new interpreter, from the
+    temporary folder; the JSON object on its last line of output, or None."""
+    out = subprocess.run([sys.executable, "-c", code.format(**fields)], capture_output=True,
+                         text=True, cwd=tempfile.gettempdir())
+    if out.returncode:
+        raise SystemExit(f"failed:\n{out.stderr[-3000:]}")
+    return json.loads(out.stdout.strip().splitlines()[-1]) if out.stdout.strip() else None
+
+
 @contextlib.contextmanager
 def worktree(revision):
     """A temporary git worktree of `revision` of this repository (removed afterwards)."""

@@ -13,13 +13,11 @@ ratios and the medians of wall and CPU time are reported, never one run's time.
 """
 
 import argparse
-import json
 import statistics
-import subprocess
-import sys
 import tempfile
 from pathlib import Path
 
+from _common import run_filled as run
 from _common import worktree
 
 HERE = Path(__file__).resolve().parent
@@ -52,14 +50,6 @@ for _ in range(2):
                      phases=h.timings, maxima=len(h.maxima), events=len(h.young)))
 print(json.dumps(min(runs, key=lambda r: r["wall"])))
 """
-
-
-def run(code, **fields):
-    out = subprocess.run([sys.executable, "-c", code.format(**fields)], capture_output=True,
-                         text=True, cwd=tempfile.gettempdir())
-    if out.returncode:
-        raise SystemExit(f"failed:\n{out.stderr[-3000:]}")
-    return json.loads(out.stdout.strip().splitlines()[-1]) if out.stdout.strip() else None
 
 
 def main():

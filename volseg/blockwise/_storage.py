@@ -55,8 +55,9 @@ __all__ = ["BlockwiseStorage", "DEFAULT_CHUNKS", "IN_MEMORY_BYTES_PER_VOXEL",
 # Chunk edge of the blockwise path when the command line chooses it (--memory-limit):
 # 128^3 blocks are 16 MB of float64, few enough tasks (512 at 1024^3) for Dask.
 DEFAULT_CHUNKS = 128
-# Peak memory of the in-memory `volseg segment` per voxel, measured end to end on a
-# smooth uint8 field (4.98 GB at 512^3: 37 B), rounded up.
+# Peak memory of the in-memory `volseg segment` per voxel, an upper bound for every input
+# type: measured end to end at 512^3 (`benchmarks/bench_memory.py`) 28.8 B for a smooth
+# uint8 field and 32.4 B for float32; a float64 input holds 4 bytes a voxel more again.
 IN_MEMORY_BYTES_PER_VOXEL = 40
 # Disk a blockwise run holds at once, bytes per voxel (its blocks are stored
 # uncompressed): the work folder's curvature 8, path ends 8 and cells 4 at the end of
