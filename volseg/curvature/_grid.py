@@ -118,8 +118,9 @@ def checked_grid_curvature(data, entry, spacing, value_scale, padding, *,
 
     `owned`: `data` may be overwritten (the stages' smoothed copy). When it is the
     interior of a float64 buffer with a 1-voxel margin (`volseg._smoothing.gaussian`),
-    that buffer is scaled and padded in place and then holds the result: no padded
-    copy and no output of its own, 16 of the stage's 33 bytes a voxel; the same
+    that buffer is scaled and padded in place and then holds the result: neither a
+    padded copy beside the smoothed one during the kernel nor an output beside it
+    after, so the stage's peak is 25 bytes a voxel, not 33 (uint8 input); the same
     numbers (`pad_in_place` is `np.pad` bit for bit)."""
     if _validate.is_lazy(data):
         from ._grid_blocks import dask_grid_curvature
