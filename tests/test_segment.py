@@ -103,6 +103,25 @@ def test_smooth_zero_is_bit_identical_and_smoothing_removes_the_checkerboard():
         segment_volume(data, smooth_sigma=-1)
 
 
+@pytest.mark.parametrize("dtype", [np.uint8, np.float64])
+@pytest.mark.parametrize("field", ["curvature", "gradient", "value"])
+def test_smoothing_in_place_leaves_the_callers_volume_and_equals_a_plain_run(dtype, field):
+    """The curvature overwrites the stages' own smoothed copy (scaled, padded, then the
+    result): never the caller's array, and the same numbers as the curvature of that
+    smoothed volume computed on its own (a float64 input as well as an 8-bit one)."""
+    from volseg._smoothing import gaussian
+    from volseg.curvature import grid_curvature
+
+    data = demo_volume(24).astype(dtype)
+    before = data.copy()
+    result = segment_volume(data, smooth_sigma=1.0, field=field, mask=None, n_regions=2)
+    np.testing.assert_array_equal(data, before)
+    if field == "curvature":
+        expected = grid_curvature(gaussian(data, 1.0), value_scale=result.value_scale)
+        np.testing.assert_array_equal(result.curvature, expected)
+        assert result.curvature.flags.c_contiguous and result.curvature.dtype == np.float64
+
+
 def test_regions_auto_takes_a_gap_only_where_it_stands_out():
     """`auto` on a power law's curve gives the default count, saying so with the
     evidence; a planted gap four times the law's step plus the significance is taken.
