@@ -34,14 +34,15 @@ def _cross_edges(graph, cell, n_cells, *, cells_mark_vertices=False):
                                             graph.indptr, graph.indices)
     n_real, index = len(graph.vertices), graph.vertices.dtype
     starts = np.empty(n_cells + 1, dtype=np.int64)
-    if cells_mark_vertices:
-        graph.vertices = None
-        members = np.empty(n_real, dtype=index)
+    # members will hold every vertex: the list is let go (4 bytes per voxel less at the
+    # peak), before they are made when the cells mark the vertices.
+    vertices, graph.vertices = (None if cells_mark_vertices else graph.vertices), None
+    members = np.empty(n_real, dtype=index)
+    if vertices is None:
         _kernels.group_by_cell_of_nodes(cell, n_cells, starts, members)
     else:
-        members = np.empty(n_real, dtype=index)
-        _kernels.group_by_cell(graph.vertices, cell, n_cells, starts, members)
-    graph.vertices = None  # members hold every vertex now: 4 bytes per voxel less at the peak
+        _kernels.group_by_cell(vertices, cell, n_cells, starts, members)
+    del vertices
     # Cells in the order of their first vertex, so that the walk moves through memory.
     # (A cell may have no vertex: the blockwise pass's cells seen only in a block's halo.)
     visit = np.argsort(members[np.minimum(starts[:-1], n_real - 1)], kind="stable").astype(np.int64)
