@@ -130,14 +130,14 @@ def _sift_down(i, key, region, n, pos):
 @numba.njit(cache=True, nogil=True)
 def _remove(r, key, region, n, pos):
     """Take region r out of the heap `key[:n]`, `region[:n]`; returns the new size."""
-    i = pos[r]
+    i = np.int64(pos[r])      # int64 slots at every call: one compiled helper each
     n -= 1
     pos[r] = -1
     if i < n:
         moved = region[n]
         _put(i, key[n], moved, key, region, pos)
         _sift_down(i, key, region, n, pos)
-        _sift_up(pos[moved], key, region, pos)
+        _sift_up(np.int64(pos[moved]), key, region, pos)
     return n
 
 
@@ -178,7 +178,7 @@ def prune_events(source, target, base, order, extinction, child, sibling, prev, 
             key[n], region[n], pos[m] = base[m], m, n
             n += 1
     for i in range((n - 2) // 4, -1, -1):
-        _sift_down(i, key, region, n, pos)
+        _sift_down(i, key, region, np.int64(n), pos)
     n_merged = 0
     while n:
         r, value = region[0], key[0]
@@ -200,7 +200,7 @@ def _joined(r, other, h, parent, heap_of, child, sibling, prev, stack):
     heaps (h ^ 1 is its other entry)."""
     keep, gone = min(r, other), max(r, other)
     parent[gone] = keep
-    heap_of[keep] = _meld(_pop(h, child, sibling, prev, stack),
+    heap_of[keep] = _meld(_pop(np.int64(h), child, sibling, prev, stack),
                           _delete(h ^ 1, heap_of[other], child, sibling, prev, stack),
                           child, sibling, prev)
     heap_of[gone] = -1
@@ -215,7 +215,7 @@ def _rekeyed(keep, gone, total, heap_of, key, region, n, pos):
     if heap_of[keep] < 0:
         return _remove(keep, key, region, n, pos)
     key[pos[keep]] = total
-    _sift_down(pos[keep], key, region, n, pos)
+    _sift_down(np.int64(pos[keep]), key, region, n, pos)
     return n
 
 

@@ -134,7 +134,7 @@ def _region_heap(key, heap_of):
             hkey[n], region[n], pos[m] = key[m], m, n
             n += 1
     for i in range((n - 2) // 4, -1, -1):
-        _sift_down(i, hkey, region, n, pos)
+        _sift_down(i, hkey, region, np.int64(n), pos)
     return hkey, region, pos, n
 
 
