@@ -279,8 +279,8 @@ def break_ties(order, values, saddle, edge_a, edge_b):
     client's peak).
     """
     n = len(order)
-    long_runs = np.empty((16, 2), dtype=np.int64)
-    n_long = 0
+    long_runs = np.empty(32, dtype=np.int64)   # start, stop, start, ...: grown by a loop
+    n_long = 0                                   # (numba's concatenate: 0.24 s to compile)
     start = 0
     while start < n:
         stop = start + 1
@@ -288,9 +288,12 @@ def break_ties(order, values, saddle, edge_a, edge_b):
         while stop < n and values[order[stop]] == first:
             stop += 1
         if stop - start > 32:
-            if n_long == len(long_runs):
-                long_runs = np.concatenate((long_runs, np.empty_like(long_runs)))
-            long_runs[n_long, 0], long_runs[n_long, 1] = start, stop
+            if 2 * n_long == len(long_runs):
+                grown = np.empty(2 * len(long_runs), dtype=np.int64)
+                for k in range(len(long_runs)):
+                    grown[k] = long_runs[k]
+                long_runs = grown
+            long_runs[2 * n_long], long_runs[2 * n_long + 1] = start, stop
             n_long += 1
         elif stop - start > 1:  # short runs (often one vertex's edges): insertion sort
             for i in range(start + 1, stop):
@@ -301,7 +304,7 @@ def break_ties(order, values, saddle, edge_a, edge_b):
                     j -= 1
                 order[j + 1] = item
         start = stop
-    return long_runs[:n_long]
+    return long_runs[:2 * n_long].reshape(n_long, 2)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -343,8 +346,7 @@ def group_by_cell(vertices, cell, n_cells, starts, members):
 
 @numba.njit(cache=True, nogil=True)
 def _pairs_of_cells(values, members, starts, visit, lo, hi, grid, offsets, indptr, indices,
-                    cell, degree, out_a, out_b, out_v, start, capacity, table, part_b, part_v,
-                    part_f, part_slot):
+                    cell, degree, out_a, out_b, out_v, start, capacity, table_size):
     """Unique cell pairs (a, b), a in visit[lo:hi] and b > a, each with its highest saddle.
 
     For every vertex of cell a and every neighbour u in a cell b > a, the edge's saddle
@@ -352,8 +354,16 @@ def _pairs_of_cells(values, members, starts, visit, lo, hi, grid, offsets, indpt
     (`table[slot]` = 1 + index into part_*, 0 if free) sized for a's vertex count, so
     it stays in cache; only the slots a used are cleared afterwards. An edge between
     two cells is seen from the smaller cell only. Writes the first `capacity` pairs
-    from out_*[start]; returns how many there were.
+    from out_*[start]; returns how many there were. The table and its columns are
+    made here, not in `cell_pairs`' parallel loop: numba compiles a loop body with
+    allocations of its own for longer.
     """
+    room = table_size // 2
+    table = np.zeros(table_size, dtype=np.int32)
+    part_b = np.empty(room, dtype=cell.dtype)
+    part_v = np.empty(room, dtype=members.dtype)
+    part_f = np.empty(room, dtype=np.float64)
+    part_slot = np.empty(room, dtype=np.int64)
     n = 0
     n_cells = len(starts) - 1
     for p in range(lo, hi):
@@ -414,16 +424,9 @@ def cell_pairs(values, members, starts, visit, bounds, chunks, grid, offsets, in
     count; the caller reruns the chunks that overflowed."""
     for i in numba.prange(len(chunks)):
         c = chunks[i]
-        room = table_sizes[c] // 2
-        table = np.zeros(table_sizes[c], dtype=np.int32)
-        part_b = np.empty(room, dtype=cell.dtype)
-        part_v = np.empty(room, dtype=members.dtype)
-        part_f = np.empty(room, dtype=np.float64)
-        part_slot = np.empty(room, dtype=np.int64)
         counts[i] = _pairs_of_cells(values, members, starts, visit, bounds[c], bounds[c + 1],
                                     grid, offsets, indptr, indices, cell, degree, out_a, out_b,
-                                    out_v, out_starts[i], capacity[i], table, part_b, part_v,
-                                    part_f, part_slot)
+                                    out_v, out_starts[i], capacity[i], table_sizes[c])
 
 
 @numba.njit(cache=True, nogil=True)
