@@ -1,5 +1,5 @@
 """The first run's compilation, said when it happens: numba compiles this install's
-kernels on their first call (about 30-50 s on 2 cores, in silence otherwise) and
+kernels on their first call (about 20-35 s on 2 cores, in silence otherwise) and
 loads them from its cache on every later run.
 """
 
@@ -10,10 +10,10 @@ from contextlib import contextmanager
 __all__ = ["FIRST_RUN_NOTE", "noting_compilation"]
 
 #: Measured on this project's 2-core machine: a fresh cache's first `volseg demo` took
-#: 36 s, the second 2.0 (benchmarks/bench_first_run.py; 41 s before each operator got
-#: a compiled pass of its own), rounded to a range for slower machines.
+#: 24.9-25.5 s, the second 2.4 (benchmarks/bench_first_run.py, 2026-12-06; 30.6-37.3 s
+#: before the angle's slow path became a call), rounded to a range for slower machines.
 FIRST_RUN_NOTE = ("compiling the numba kernels (first run after an install only, about "
-                  "25-45 s; cached for every later run)")
+                  "20-35 s; cached for every later run)")
 
 
 @contextmanager
