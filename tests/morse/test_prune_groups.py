@@ -3,6 +3,10 @@ pruning and its definition: every partition into leaves, every tree of groups, t
 zeros, lone cells, several components; and on hierarchies of fields with plateaus,
 masks and every connectivity."""
 
+import os
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
@@ -108,3 +112,33 @@ def test_fixed_point_keys_order_ties_exactly_where_float_sums_do_not():
     floats = np.empty(3, np.int64)
     prune(source, target, 4, fixed.values, floats, np.empty(3))
     assert floats.tolist() == [0, 1, 2]                # why the keys are integers
+
+
+HEAP_HELPERS = """
+import numpy as np
+from volseg.morse import _prune
+from volseg.morse._group_tree import block_tree
+from volseg.morse._prune_groups import grouped_prune
+for kind in (np.int32, np.int64):
+    source, target = np.array([0, 1, 0], kind), np.array([1, 2, 3], kind)
+    base = np.array([3, 5, 9, 1], np.int64)
+    order, extinction = np.empty(3, np.int64), np.empty(3, np.int64)
+    _prune.prune(source, target, 4, base, order, extinction)
+    grouped_prune(source, target, base, np.array([0, 0, 1, 1]), block_tree((2, 1, 1)))
+helpers = (_prune._sift_down, _prune._sift_up, _prune._pop)
+print([len(f.signatures) for f in helpers], [f.signatures for f in helpers])
+"""
+
+
+def test_the_heap_helpers_compile_once(tmp_path):
+    """Every call of the pruning's heap helpers passes int64 slots (`_prune._remove`
+    says why), so each is compiled once whatever the events' and regions' integer
+    types (the keys' type, int64 sizes or float64 hypervolumes, is another
+    specialisation; int64 here): a call with an int32 slot would compile another
+    copy, 0.3-0.5 CPU-s more on every first run. Counted in a new process on an
+    empty numba cache (a kernel loaded from the cache does not compile its callees)."""
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba-cache")}
+    run = subprocess.run([sys.executable, "-c", HEAP_HELPERS], capture_output=True,
+                         text=True, env=env)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.startswith("[1, 1, 1] "), run.stdout

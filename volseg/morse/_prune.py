@@ -168,17 +168,7 @@ def prune_events(source, target, base, order, extinction, child, sibling, prev, 
     for e in range(n_ev):             # entry 2e at the source's end, 2e + 1 the target's
         heap_of[source[e]] = _meld(heap_of[source[e]], 2 * e, child, sibling, prev)
         heap_of[target[e]] = _meld(heap_of[target[e]], 2 * e + 1, child, sibling, prev)
-    # The regions' heap: key[i] the measure of region[i]; pos[r] where r is (-1: out).
-    key = np.empty(n_max, dtype=base.dtype)
-    region = np.empty(n_max, dtype=parent.dtype)
-    pos = np.full(n_max, -1, dtype=parent.dtype)
-    n = 0
-    for m in range(n_max):            # a cell without events is alone: it never merges
-        if heap_of[m] >= 0:
-            key[n], region[n], pos[m] = base[m], m, n
-            n += 1
-    for i in range((n - 2) // 4, -1, -1):
-        _sift_down(i, key, region, np.int64(n), pos)
+    key, region, pos, n = region_heap(base, heap_of, parent)
     n_merged = 0
     while n:
         r, value = region[0], key[0]
@@ -191,6 +181,26 @@ def prune_events(source, target, base, order, extinction, child, sibling, prev, 
         keep, gone = _joined(r, other, h, parent, heap_of, child, sibling, prev, stack)
         n = _rekeyed(keep, gone, value + key[pos[other]], heap_of, key, region, n, pos)
     return n_merged
+
+
+@numba.njit(cache=True, nogil=True)
+def region_heap(base, heap_of, like):
+    """The 4-ary heap (key, region, pos, size) of the regions an edge leaves (heap_of[m]
+    >= 0; a region without one is alone: it never merges): key[i] = base[region[i]] in
+    `base`'s type, pos[r] where region r is (-1: out), region and pos in `like`'s
+    integer type. Ties by the larger index (`_before`)."""
+    n_reg = len(heap_of)
+    key = np.empty(n_reg, dtype=base.dtype)
+    region = np.empty(n_reg, dtype=like.dtype)
+    pos = np.full(n_reg, -1, dtype=like.dtype)
+    n = 0
+    for m in range(n_reg):
+        if heap_of[m] >= 0:
+            key[n], region[n], pos[m] = base[m], m, n
+            n += 1
+    for i in range((n - 2) // 4, -1, -1):
+        _sift_down(i, key, region, np.int64(n), pos)
+    return key, region, pos, n
 
 
 @numba.njit(cache=True, nogil=True, inline="always")

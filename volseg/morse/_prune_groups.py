@@ -38,7 +38,7 @@ from .._sizes import SizedByArrays
 from .._union_find import find_root
 from ._group_tree import block_tree
 from ._kernels import counting_sort
-from ._prune import _before, _joined, _meld, _rekeyed, _remove, _sift_down
+from ._prune import _before, _joined, _meld, _rekeyed, _remove, region_heap
 
 __all__ = []
 
@@ -71,7 +71,7 @@ def prune_group(key, rid, u, v, out_key, out_id):
     pruned = np.full(n_ev, -1, dtype=np.int64)
     sequence = np.empty(n_ev, dtype=np.int64)
     n_decided = 0
-    hkey, region, pos, n = _region_heap(key, heap_of)
+    hkey, region, pos, n = region_heap(key, heap_of, heap_of)
     while n:
         r = region[0]
         h = heap_of[r]                # the highest edge leaving r
@@ -118,24 +118,6 @@ def _edge_heaps(n_reg, u, v, out_key, out_id):
         elif _before(out_key[e], out_id[e], low_key[u[e]], low_id[u[e]]):
             low_key[u[e]], low_id[u[e]] = out_key[e], out_id[e]
     return child, sibling, prev, stack, heap_of, low_key, low_id
-
-
-@numba.njit(cache=True, nogil=True)
-def _region_heap(key, heap_of):
-    """The 4-ary heap (hkey, region, pos, size) of the regions with an edge; ties by
-    the larger local index, which is the larger id."""
-    n_reg = len(key)
-    hkey = np.empty(n_reg, dtype=np.int64)
-    region = np.empty(n_reg, dtype=heap_of.dtype)
-    pos = np.full(n_reg, -1, dtype=heap_of.dtype)
-    n = 0
-    for m in range(n_reg):
-        if heap_of[m] >= 0:
-            hkey[n], region[n], pos[m] = key[m], m, n
-            n += 1
-    for i in range((n - 2) // 4, -1, -1):
-        _sift_down(i, hkey, region, np.int64(n), pos)
-    return hkey, region, pos, n
 
 
 @numba.njit(cache=True, nogil=True)
