@@ -487,7 +487,7 @@ def run_stages(data, request: SegmentRequest, storage: Storage | None = None, *,
     del values, data
     hierarchy, labels, report = _morse_and_cut(
         for_morse(entry, field), request.cut, timings, mask=choice.mask, storage=storage,
-        vertex_weight=float(np.prod(request.spacing)))
+        vertex_weight=float(np.prod(request.spacing)), own_field=entry.name != GIVEN)
     result = Segmentation(labels, field, hierarchy, operator=request.operator.name,
                           value_scale=scale, spacing=request.spacing, timings=timings,
                           mask=choice, smooth_sigma=request.smooth_sigma,
@@ -507,14 +507,16 @@ def _checked_given(field, data):
 
 
 def _morse_and_cut(field, cut: CutRequest, timings, *, mask=None, adjacency=None,
-                   vertex_weight=None, storage: Storage) -> tuple:
+                   vertex_weight=None, storage: Storage, own_field=False) -> tuple:
     """The Morse stage and the cut: (hierarchy, labels 1..k, `CutReport`), sizes
     counted in `vertex_weight` per vertex (`MorseHierarchy.with_vertex_weight`). A
     blockwise hierarchy stays where it was built and is cut there
-    (`volseg.morse.HierarchyOnWorkers`)."""
+    (`volseg.morse.HierarchyOnWorkers`). `own_field`: the field is the stages' own
+    (not the user's array): the build may use its buffer (``overwrite_field``)."""
     with _timed(timings, "morse", storage):
         hierarchy = descending_complex(field, adjacency=adjacency, mask=mask,
-                                       block_hooks=storage.block_hooks, on_workers=True)
+                                       block_hooks=storage.block_hooks, on_workers=True,
+                                       overwrite_field=own_field)
         if vertex_weight is not None:
             hierarchy = hierarchy.with_vertex_weight(vertex_weight)
     with _timed(timings, "cut", storage):

@@ -414,3 +414,96 @@ def test_region_tops_are_each_regions_first_maximum_without_a_sort():
     shuffled = np.array([2, 2, 0, -1, 1, 0, 2])           # not numbered in first order
     assert np.array_equal(region_tops(shuffled, 3), [2, 4, 0])
     assert len(region_tops(np.array([], dtype=np.int64), 0)) == 0
+
+
+_HIERARCHY_ARRAYS = ("cells", "maxima", "values", "young", "elder", "target", "source",
+                     "saddle", "saddle_value", "persistence")
+
+
+def _in_a_padded_buffer(values, extra=0):
+    """`values` (3-D float64) copied to the start of a flat buffer with room for them
+    padded by one voxel (and `extra` more values), as `volseg.curvature` leaves them."""
+    room = int(np.prod([n + 2 for n in values.shape])) + extra
+    buffer = np.full(room, 7.5)
+    field = buffer[:values.size].reshape(values.shape)
+    field[...] = values
+    return field
+
+
+@pytest.mark.parametrize("shape", [(6, 5, 7), (1, 4, 3), (5, 1, 1), (1, 1, 1), (3, 8, 2)])
+def test_a_build_in_the_fields_buffer_equals_the_build_on_a_copy(shape, rng, monkeypatch):
+    """`overwrite_field`: the same hierarchy as on a copy, ties and plateaus, with and
+    without a mask (NaN outside it), every connectivity; the field holds its own
+    values again afterwards, bit for bit (NaN and -0.0 included)."""
+    from volseg.morse import _build
+
+    for trial in range(12):
+        values = rng.integers(0, 4, shape).astype(np.float64)
+        values[rng.random(shape) < 0.1] = -0.0
+        mask = None if trial % 3 == 0 else rng.random(shape) < (0.7, 1.0)[trial % 3 - 1]
+        if mask is not None:
+            mask.flat[0] = True
+            values[~mask] = np.nan
+        connectivity = ("kuhn", 6, 18, 26)[trial % 4]
+        field = _in_a_padded_buffer(values, extra=trial)
+        want = descending_complex(values.copy(), mask=mask, connectivity=connectivity)
+        with monkeypatch.context() as patched:      # not the copy's path
+            patched.setattr(_build, "_neighbourhood", None)
+            got = descending_complex(field, mask=mask, connectivity=connectivity,
+                                     overwrite_field=True)
+        for name in _HIERARCHY_ARRAYS:
+            assert_array_equal(getattr(got, name), getattr(want, name), err_msg=name)
+        assert_array_equal(got.segment(min_persistence=1.0), want.segment(min_persistence=1.0))
+        assert field.tobytes() == values.tobytes(), trial
+        assert got._field is field
+
+
+def test_a_build_in_the_fields_buffer_gives_it_back_when_it_fails(rng, monkeypatch):
+    """An error (an interrupt) inside the build leaves the field as it was."""
+    from volseg.morse import _build
+
+    values = smooth_random_field((9, 8, 7), rng)
+    mask = values > np.median(values)
+    field = _in_a_padded_buffer(values)
+
+    def failing(*args):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(_build, "_merge_events", failing)
+    with pytest.raises(KeyboardInterrupt):
+        descending_complex(field, mask=mask, overwrite_field=True)
+    assert field.tobytes() == values.tobytes()
+
+
+def test_a_field_without_room_is_copied_not_overwritten(rng):
+    """`overwrite_field` on fields it cannot use (no room, another type, order or
+    dimension, a view inside a buffer): the copy's build, the field untouched."""
+    values = smooth_random_field((6, 7, 5), rng)
+    short = np.full(values.size + 10, 3.0)
+    cases = [values.copy(), values.astype(np.float32), np.asfortranarray(values),
+             values.reshape(42, 5).copy(), short[:values.size].reshape(values.shape),
+             _in_a_padded_buffer(np.pad(values, 1))[1:-1, 1:-1, 1:-1]]
+    for case in cases:
+        case[...] = values.reshape(case.shape)
+        before = case.tobytes()
+        want = descending_complex(case.copy())
+        got = descending_complex(case, overwrite_field=True)
+        assert_array_equal(got.persistence, want.persistence)
+        assert case.tobytes() == before
+    assert np.all(short[values.size:] == 3.0)
+
+
+def test_the_pipelines_field_is_built_in_its_own_buffer():
+    """`segment_volume` leaves its curvature where the Morse build pads it in place
+    (8 bytes a voxel less at the Morse stage's peak), for a smoothed integer volume
+    (the smoothing's buffer) and a float one (the curvature's own)."""
+    from volseg import segment_volume
+    from volseg.morse._graph import room_to_pad
+
+    rng = np.random.default_rng(3)
+    for volume in (rng.integers(0, 255, (12, 10, 9)).astype(np.uint8),
+                   smooth_random_field((12, 10, 9), rng).astype(np.float32)):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")        # fewer maxima than asked, say
+            result = segment_volume(volume, n_regions=3)
+        assert room_to_pad(result.curvature) is not None, volume.dtype

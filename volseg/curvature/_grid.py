@@ -141,7 +141,9 @@ def checked_grid_curvature(data, entry, spacing, value_scale, padding, *,
     acc = np.zeros((entry.grid_channels,) + fp.shape)
     grid_kernel(fp, h, entry.grid_code, _kernel_tables(h), acc)
     # The padded values are spent: an owned buffer's first voxels take the result.
-    out = fp.reshape(-1)[:data.size].reshape(data.shape) if owned else None
+    # Else the result starts a buffer of the padded size too (its tail untouched, so
+    # not resident): the Morse build may pad it in place (`morse._graph.room_to_pad`).
+    out = (fp.reshape(-1) if owned else np.empty(fp.size))[:data.size].reshape(data.shape)
     del fp
     return entry.grid_finish(acc, (slice(1, -1),) * 3, h, out)
 

@@ -172,19 +172,88 @@ def _neighbourhood(values, mask, adjacency, connectivity) -> _Neighbourhood:
             values = np.where(mask, values, -np.inf)
         vertices = np.arange(values.size, dtype=np.int64) if mask is None else np.flatnonzero(mask)
         return _Neighbourhood(values, vertices, False, empty, indptr, indices, None)
-    steps = grid_offsets(values.ndim, connectivity)
     # -inf around the grid and, with a mask, at every vertex outside it: written into
     # the padded array directly, no full-size temporary on the way.
     padded = np.full(tuple(n + 2 for n in values.shape), -np.inf)
     np.copyto(padded[(slice(1, -1),) * values.ndim], values,
               where=True if mask is None else mask)
+    return _grid_graph(padded, mask, connectivity)
+
+
+def _grid_graph(padded, mask, connectivity) -> _Neighbourhood:
+    """The grid neighbourhood of `padded` (the field with its -inf layer and -inf
+    outside `mask`)."""
+    ndim = padded.ndim
+    steps = grid_offsets(ndim, connectivity)
     strides = np.array([s // padded.itemsize for s in padded.strides], dtype=np.int64)
     index = index_type(padded.size + 1)
-    node = np.zeros((1,) * values.ndim, dtype=index)
-    for axis, (size, stride) in enumerate(zip(values.shape, strides, strict=True)):
-        step = ((np.arange(size) + 1) * stride).astype(index)
-        node = node + step.reshape([-1 if a == axis else 1 for a in range(values.ndim)])
+    node = np.zeros((1,) * ndim, dtype=index)
+    for axis, (size, stride) in enumerate(zip(padded.shape, strides, strict=True)):
+        step = ((np.arange(size - 2) + 1) * stride).astype(index)
+        node = node + step.reshape([-1 if a == axis else 1 for a in range(ndim)])
     vertices = node.ravel() if mask is None else node[mask]
     dummy = np.zeros(1, dtype=np.int64)
     return _Neighbourhood(padded.ravel(), vertices, True, (steps @ strides).astype(np.int64),
                           dummy, dummy, padded.shape)
+
+
+def room_to_pad(values):
+    """The flat float64 buffer that `values` (a 3-D C-ordered float64 array) starts,
+    when it holds `values` padded by one voxel on every side; else None.
+    `volseg.curvature` leaves its grid result so (`_grid.checked_grid_curvature`)."""
+    owner = values.base
+    if (values.ndim != 3 or values.dtype != np.float64 or not values.flags.c_contiguous
+            or not isinstance(owner, np.ndarray) or owner.base is not None
+            or owner.dtype != np.float64 or not owner.flags.c_contiguous
+            or owner.size < np.prod([n + 2 for n in values.shape])
+            or owner.__array_interface__["data"][0] != values.__array_interface__["data"][0]):
+        return None
+    return owner.reshape(-1)
+
+
+class PaddedInPlace:
+    """The grid neighbourhood of a 3-D float64 field built in the field's own buffer
+    (`room_to_pad`): no 8-byte-a-voxel padded copy. Entering moves the values to their
+    padded places (each to a higher address, last first), writes -inf around them and
+    outside the mask (those values kept aside); leaving moves them back (first first)
+    and restores the kept ones, whatever happened inside: the field holds its own
+    values again, bit for bit. Nothing else may read the field meanwhile."""
+
+    def __init__(self, values, buffer, mask, connectivity):
+        self.values, self.buffer, self.mask = values, buffer, mask
+        self.connectivity, self._kept = connectivity, None
+        shape = values.shape
+        self._padded = buffer[:int(np.prod([n + 2 for n in shape]))].reshape(
+            tuple(n + 2 for n in shape))
+        self._flat = buffer[:values.size].reshape(shape[0], -1)
+
+    def __enter__(self) -> _Neighbourhood:
+        padded, flat, n1, n2 = self._padded, self._flat, *self.values.shape[1:]
+        inner = padded[1:-1, 1:-1, 1:-1]
+        # Every padded slab starts above the end of its flat slab and of all before it.
+        for x in range(len(flat) - 1, -1, -1):
+            inner[x] = flat[x].reshape(n1, n2)
+        try:
+            for axis in range(3):
+                edges = (slice(None),) * axis
+                padded[(*edges, 0)] = padded[(*edges, -1)] = -np.inf
+            if self.mask is not None:
+                outside = ~self.mask
+                self._kept = inner[outside]
+                inner[outside] = -np.inf
+            return _grid_graph(padded, self.mask, self.connectivity)
+        except BaseException:
+            self._back()
+            raise
+
+    def __exit__(self, *exc) -> None:
+        self._back()
+
+    def _back(self) -> None:
+        padded, flat, n1, n2 = self._padded, self._flat, *self.values.shape[1:]
+        inner = padded[1:-1, 1:-1, 1:-1]
+        for x in range(len(flat)):           # every flat slab ends below its padded one
+            flat[x] = inner[x].reshape(n1 * n2)
+        if self._kept is not None:
+            self.values[~self.mask] = self._kept
+            self._kept = None
