@@ -16,6 +16,7 @@ field or the argument.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import shutil
 import time
@@ -339,10 +340,14 @@ def segment_to_files(volume, outputs, *, operator="weighted", n_regions=None,
             if lazy:
                 shutil.rmtree(storage.work_folder, ignore_errors=True)
             raise
+        blockwise = storage.describe(result.hierarchy) if lazy else None
+        # The files need the cut, not the hierarchy: its cells (4 bytes a voxel) go
+        # before the writers' casts, the peak of the writing.
+        result = dataclasses.replace(result, hierarchy=None)
         info = _write_result(paths, volume, result, data, value_range, outputs,
                              checksum=checksum, noise=noise, seed=seed,
                              requested_regions=n_regions, started=started, say=say,
-                             blockwise=storage.describe(result.hierarchy) if lazy else None)
+                             blockwise=blockwise)
         _unchanged(volume.files, read_as)     # else nothing is committed
         done["info"], done["storage"] = info, storage
 
