@@ -122,8 +122,8 @@ def test_a_killed_run_resumes_from_its_finished_blocks(tmp_path, volume, capsys,
     assert done["cells"] == 27 and done["forests"] == 5 and done["curvature"] > 0
     assert not (work / "ends").exists()        # the ascent's ends: gone once cells are stored
 
-    kernel, runs = _grid_blocks._Block.__call__, []
-    monkeypatch.setattr(_grid_blocks._Block, "__call__",
+    kernel, runs = _grid_blocks.BlockCurvature.__call__, []
+    monkeypatch.setattr(_grid_blocks.BlockCurvature, "__call__",
                         lambda self, *a, **k: runs.append(1) or kernel(self, *a, **k))
     capsys.readouterr()
     assert main([*argv[:-1], "-o", str(out)]) == 0

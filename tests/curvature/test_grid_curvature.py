@@ -109,18 +109,41 @@ def test_memory_layout_does_not_change_the_result(layout, rng):
     assert np.array_equal(grid_curvature(other, "weighted"), expected)
 
 
-@pytest.mark.parametrize("shape", [(6, 7, 5), (1, 4, 3), (2, 1, 5), (3, 2, 1)])
-@pytest.mark.parametrize("padding", ["linear", "mirror"])
-def test_padding_in_place_is_numpys_padding_bit_for_bit(shape, padding, rng):
-    """The margin filled in place (the stages' own smoothed buffer) holds what np.pad
-    writes, corners and one-voxel axes included."""
-    from volseg.curvature._grid import _PADDING, pad_in_place
+def _whole_volume_at_once(volume, operator, padding, scale, h):
+    """The curvature as the in-memory path computed it before its slabs: the whole
+    volume scaled, padded by np.pad and run through the kernel at once."""
+    from volseg.curvature import get_operator
+    from volseg.curvature._grid import _PADDING
+    from volseg.curvature._grid_kernels import grid_kernel
+    from volseg.curvature._grid_tables import _kernel_tables
 
-    f = rng.standard_normal(shape) * 10.0 ** rng.integers(-8, 8, shape)
-    fp = np.full(tuple(n + 2 for n in shape), np.nan)
-    fp[INNER] = f
-    pad_in_place(fp, padding)
-    assert np.array_equal(fp, np.pad(f, 1, **_PADDING[padding]))
+    entry, h = get_operator(operator), np.asarray(h, dtype=np.float64)
+    fp = np.pad(volume.astype(np.float64) * scale, 1, **_PADDING[padding])
+    acc = np.zeros((entry.grid_channels,) + fp.shape)
+    grid_kernel(fp, h, entry.grid_code, _kernel_tables(h), acc)
+    return entry.grid_finish(acc, INNER, h)
+
+
+@pytest.mark.parametrize("shape", [(6, 7, 5), (1, 4, 3), (2, 1, 5), (3, 2, 1), (7, 1, 1)])
+@pytest.mark.parametrize("padding", ["linear", "mirror"])
+def test_slabs_give_the_whole_volumes_curvature_bit_for_bit(shape, padding, rng, monkeypatch):
+    """The in-memory curvature, slab by slab with halos, equals the whole volume's at
+    once for every operator and slab thickness (1 voxel up), one-voxel axes, both
+    paddings, anisotropic spacing, integer and float inputs; the result starts a
+    buffer with room for it padded."""
+    from volseg.curvature import _grid, checked_grid_curvature, get_operator
+    from volseg.morse._graph import room_to_pad
+
+    h = (1.0, 0.7, 1.3)
+    f = rng.standard_normal(shape) * 10.0 ** rng.integers(-3, 3, shape)
+    for volume in (f, (50 * rng.random(shape)).astype(np.uint8)):
+        for operator in ALL:
+            want = _whole_volume_at_once(volume, operator, padding, 0.37, h)
+            for thick in range(1, shape[0] + 1):
+                monkeypatch.setattr(_grid, "MIN_SLAB", thick)
+                got = checked_grid_curvature(volume, get_operator(operator), h, 0.37, padding)
+                assert got.tobytes() == want.tobytes(), (operator, thick, volume.dtype)
+                assert room_to_pad(got) is not None
 
 
 @pytest.mark.parametrize("operator", ALL)

@@ -6,7 +6,6 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .. import _validate
-from ._grid_tables import _kernel_tables
 from ._registry import get_operator
 
 __all__ = ["grid_curvature", "default_value_scale", "checked_grid_curvature", "check_padding"]
@@ -118,34 +117,65 @@ def checked_grid_curvature(data, entry, spacing, value_scale, padding, *,
 
     `owned`: `data` may be overwritten (the stages' smoothed copy). When it is the
     interior of a float64 buffer with a 1-voxel margin (`volseg._smoothing.gaussian`),
-    that buffer is scaled and padded in place and then holds the result: neither a
-    padded copy beside the smoothed one during the kernel nor an output beside it
-    after, so the stage's peak is 25 bytes a voxel, not 33 (uint8 input); the same
-    numbers (`pad_in_place` is `np.pad` bit for bit)."""
+    that buffer takes the result.
+
+    In memory the volume goes through the kernel in slabs along its first axis, each
+    with a 1-voxel halo, exactly as the blockwise path's blocks (`_grid_blocks`):
+    the same sums in the same order, so the same numbers as the whole padded volume
+    at once (tested), and the stage holds the input, the result and one slab's work
+    arrays, not a padded float64 copy and an accumulator of 2-9 channels beside them
+    (24 bytes a voxel for the weighted operator). The result starts a buffer with
+    room for it padded by one voxel (the owned buffer: each slab is read before the
+    result reaches it; else a new one, its tail untouched), where the Morse build
+    pads it in place (`volseg.morse._graph.room_to_pad`)."""
     if _validate.is_lazy(data):
         from ._grid_blocks import dask_grid_curvature
 
         return dask_grid_curvature(data, entry, spacing, value_scale, padding, block_hooks)
-    from ._grid_kernels import grid_kernel
+    from ._grid_blocks import BlockCurvature
 
-    h = np.array(spacing, dtype=np.float64)
-    fp = _margin_buffer(data) if owned else None
-    if fp is None:
-        scaled = data.astype(np.float64, order="C")  # a copy in C order, whatever the input's
-        scaled *= value_scale
-        fp = np.pad(scaled, 1, **_PADDING[padding])  # C order in, C order out
-        del scaled
-    else:
-        data *= value_scale
-        pad_in_place(fp, padding)
-    acc = np.zeros((entry.grid_channels,) + fp.shape)
-    grid_kernel(fp, h, entry.grid_code, _kernel_tables(h), acc)
-    # The padded values are spent: an owned buffer's first voxels take the result.
-    # Else the result starts a buffer of the padded size too (its tail untouched, so
-    # not resident): the Morse build may pad it in place (`morse._graph.room_to_pad`).
-    out = (fp.reshape(-1) if owned else np.empty(fp.size))[:data.size].reshape(data.shape)
-    del fp
-    return entry.grid_finish(acc, (slice(1, -1),) * 3, h, out)
+    owner = _margin_buffer(data) if owned else None
+    room = owner.reshape(-1) if owner is not None else np.empty(
+        int(np.prod([n + 2 for n in data.shape])))
+    out = room[:data.size].reshape(data.shape)
+    nx = data.shape[0]
+    thick = slab_thickness(data.shape)
+    starts = [list(range(0, nx, thick)), [0], [0]]
+    kernel = BlockCurvature(entry, spacing, value_scale, padding, starts, data.shape)
+    # One slab's and one accumulator's memory, reused by every slab.
+    plane = (data.shape[1] + 2) * (data.shape[2] + 2)
+    slab_room = np.empty((thick + 2) * plane)
+    acc_room = np.empty(entry.grid_channels * (thick + 2) * plane)
+    for k, x0 in enumerate(starts[0]):
+        x1 = min(x0 + thick, nx)
+        fp = _scaled_slab(data, x0, x1, value_scale, slab_room)
+        # Written behind every row a later slab reads (in an owned buffer).
+        kernel.of_scaled(fp, (k, 0, 0), out[x0:x1], acc_room)
+    return out
+
+
+#: In-memory slabs hold about 1/SLABS of the volume each, at least MIN_SLAB voxels thick
+#: (each kernel call's parallel loop then has 16+ cube slabs per turn for 2 threads).
+SLABS, MIN_SLAB = 16, 32
+
+
+def slab_thickness(shape) -> int:
+    """The thickness (first axis) of the in-memory curvature's slabs."""
+    return max(MIN_SLAB, -(-shape[0] // SLABS))
+
+
+def _scaled_slab(data, x0: int, x1: int, value_scale: float, room):
+    """Rows x0..x1 of `data` in float64 times `value_scale`, with a 1-voxel halo of
+    their neighbours' on the first axis (zeros where the volume ends there, and on the
+    other axes: the block kernel pads those), in the flat float64 `room`."""
+    nx, ny, nz = data.shape
+    lo, hi = max(x0 - 1, 0), min(x1 + 1, nx)
+    block = room[:(x1 - x0 + 2) * (ny + 2) * (nz + 2)].reshape(x1 - x0 + 2, ny + 2, nz + 2)
+    block.fill(0.0)
+    inner = block[lo - x0 + 1:hi - x0 + 1, 1:-1, 1:-1]
+    inner[...] = data[lo:hi]
+    inner *= value_scale
+    return block
 
 
 def _margin_buffer(data):
@@ -159,27 +189,3 @@ def _margin_buffer(data):
     same = (inner.__array_interface__["data"] == data.__array_interface__["data"]
             and inner.strides == data.strides)
     return base if same else None
-
-
-def pad_in_place(fp, padding: str) -> None:
-    """Fill the 1-voxel margin of `fp` from its interior as ``np.pad(interior, 1,
-    **_PADDING[padding])`` does, bit for bit: axis by axis, each over the margins of the
-    axes before it and the interior of those after (numpy's order, so the corners are
-    the same), ``2 edge - next`` for 'linear', ``next`` for 'mirror', the edge value on
-    an axis of one voxel (numpy's rule for a singleton)."""
-    odd = _PADDING[padding].get("reflect_type") == "odd"
-    for axis in range(fp.ndim):
-        view = fp[tuple(slice(None) if a <= axis else slice(1, -1) for a in range(fp.ndim))]
-
-        def at(i, axis=axis, view=view):
-            return view[(slice(None),) * axis + (i,)]
-
-        if fp.shape[axis] == 3:        # one voxel: its value on both sides
-            at(0)[...] = at(1)
-            at(2)[...] = at(1)
-        elif odd:
-            at(0)[...] = 2 * at(1) - at(2)
-            at(-1)[...] = 2 * at(-2) - at(-3)
-        else:
-            at(0)[...] = at(2)
-            at(-1)[...] = at(-3)

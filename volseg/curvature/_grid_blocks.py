@@ -25,7 +25,7 @@ from ._grid_tables import _kernel_tables
 __all__ = ["dask_grid_curvature"]
 
 
-class _Block:
+class BlockCurvature:
     """The per-block function. A module-level class, not a closure: a distributed
     worker unpickles it by reference to this module, so the compiled kernel is the
     module's own (a closure carries the numba dispatcher by value, and each task then
@@ -40,23 +40,51 @@ class _Block:
         # `block`: the raw input over this chunk and a 1-voxel halo (placeholders
         # where the halo leaves the volume).
         fp = np.ascontiguousarray(block, dtype=np.float64) * self.value_scale
+        self._padded(fp, block_id)
+        if not np.isfinite(fp).all():
+            raise ValueError("the volume holds NaN or infinite values; replace them (e.g. "
+                             "numpy.nan_to_num) first")
+        return self._curvature(fp, block_id)
+
+    def of_scaled(self, fp, block_id, out=None, room=None):
+        """The curvature of a block given scaled already: `fp` float64, C order, the
+        block's values times the scale (finite) and a 1-voxel halo (placeholders where
+        the volume ends, padded here, in place); into `out` if given, the accumulator
+        in the flat float64 `room` if given (the in-memory path's slabs reuse both)."""
+        self._padded(fp, block_id)
+        return self._curvature(fp, block_id, out, room)
+
+    def _padded(self, fp, block_id) -> None:
         for axis in range(3):           # the in-memory padding, in its axis order
             start = self.starts[axis][block_id[axis]]
-            stop = start + block.shape[axis] - 2
+            stop = start + fp.shape[axis] - 2
+            if self.shape[axis] == 1:   # one voxel: its value on both sides (np.pad's rule)
+                _pad_one_voxel(fp, axis)
+                continue
             if start == 0:
                 _pad(fp, axis, 0, self.padding)
             if stop == self.shape[axis]:
                 _pad(fp, axis, -1, self.padding)
-        if not np.isfinite(fp).all():
-            raise ValueError("the volume holds NaN or infinite values; replace them (e.g. "
-                             "numpy.nan_to_num) first")
+
+    def _curvature(self, fp, block_id, out=None, room=None):
         entry, h = self.entry, self.h
-        acc = np.zeros((entry.grid_channels,) + fp.shape)
+        shape = (entry.grid_channels,) + fp.shape
+        if room is None:
+            acc = np.zeros(shape)
+        else:
+            acc = room[:int(np.prod(shape))].reshape(shape)
+            acc.fill(0.0)
         # Local slab 0 is the padded volume's cube row (first row - 1): keep the
         # in-memory parity order, so the sums (and results) are bit-identical.
         first = self.starts[0][block_id[0]] % 2
         grid_kernel(fp, h, entry.grid_code, _kernel_tables(h), acc, first)
-        return entry.grid_finish(acc, (slice(1, -1),) * 3, h)
+        return entry.grid_finish(acc, (slice(1, -1),) * 3, h, out)
+
+
+def _pad_one_voxel(fp, axis: int):
+    """Both halo layers of `axis`, a volume one voxel thick along it, set to that voxel."""
+    moved = np.moveaxis(fp, axis, 0)
+    moved[0] = moved[2] = moved[1]
 
 
 def _pad(fp, axis: int, end: int, padding: str):
@@ -81,7 +109,7 @@ def dask_grid_curvature(array, entry, spacing, value_scale, padding, hooks=None)
     blocks are cheap to make again (read from a file), so each is made again for its
     own halo (`volseg._halo`, fresh) instead of waiting in memory for it."""
     starts = [s.tolist() for s in block_starts(array.chunks)]
-    kernel = _Block(entry, spacing, value_scale, padding, starts, array.shape)
+    kernel = BlockCurvature(entry, spacing, value_scale, padding, starts, array.shape)
     reread = False
     if hooks is not None:
         kernel, reread = hooks.wrap("curvature", kernel), hooks.reread
