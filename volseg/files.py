@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from . import _validate
+from ._distinct import label_type
 from ._jit_cache import noting_compilation
 from ._responsive import responsive
 from .errors import UsageError, VolsegWarning
@@ -342,8 +343,10 @@ def segment_to_files(volume, outputs, *, operator="weighted", n_regions=None,
             raise
         blockwise = storage.describe(result.hierarchy) if lazy else None
         # The files need the cut, not the hierarchy: its cells (4 bytes a voxel) go
-        # before the writers' casts, the peak of the writing.
-        result = dataclasses.replace(result, hierarchy=None)
+        # before the writers' casts, the peak of the writing; so do the int32 labels,
+        # once cast to the type they are written in.
+        result = dataclasses.replace(result, hierarchy=None, labels=result.labels.astype(
+            label_type(result.n_regions), copy=False))
         info = _write_result(paths, volume, result, data, value_range, outputs,
                              checksum=checksum, noise=noise, seed=seed,
                              requested_regions=n_regions, started=started, say=say,

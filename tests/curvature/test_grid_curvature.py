@@ -148,21 +148,25 @@ def test_slabs_give_the_whole_volumes_curvature_bit_for_bit(shape, padding, rng,
 
 @pytest.mark.parametrize("operator", ALL)
 @pytest.mark.parametrize("padding", ["linear", "mirror"])
-def test_an_owned_smoothed_buffer_gives_the_same_curvature(operator, padding, rng):
-    """Curvature of the stages' smoothed copy, scaled, padded and overwritten in place
-    (`owned`), equals the one of a copy, bit for bit; a view that is not a margin
-    buffer's interior is copied as before."""
+def test_an_owned_smoothed_buffer_gives_the_same_curvature(operator, padding, rng,
+                                                          monkeypatch):
+    """Curvature of the stages' smoothed copy, read slab by slab and overwritten by the
+    result in its own buffer (`owned`), equals the one of a copy, bit for bit, for
+    any slab thickness (each slab is read before the result reaches its rows); a view
+    that is not a margin buffer's interior is copied as before."""
     from volseg._smoothing import gaussian
-    from volseg.curvature import checked_grid_curvature, get_operator
+    from volseg.curvature import _grid, checked_grid_curvature, get_operator
 
     volume = (255 * rng.random((13, 11, 9))).astype(np.uint8)
     entry, h = get_operator(operator), (0.7, 1.0, 1.3)
-    expected = checked_grid_curvature(gaussian(volume, 1.0), entry, h, 0.3, padding)
-    owned = gaussian(volume, 1.0, margin=1)
-    assert owned.base.shape == (15, 13, 11)
-    result = checked_grid_curvature(owned, entry, h, 0.3, padding, owned=True)
-    assert np.array_equal(result, expected)
-    assert result.flags.c_contiguous
+    expected = _whole_volume_at_once(gaussian(volume, 1.0), operator, padding, 0.3, h)
+    for thick in (1, 2, 3, 5, 13):
+        monkeypatch.setattr(_grid, "MIN_SLAB", thick)
+        owned = gaussian(volume, 1.0, margin=1)
+        assert owned.base.shape == (15, 13, 11)
+        result = checked_grid_curvature(owned, entry, h, 0.3, padding, owned=True)
+        assert result.tobytes() == expected.tobytes(), thick
+        assert result.flags.c_contiguous and np.shares_memory(result, owned.base)
     other = np.zeros((13, 11, 9, 2))[..., 0]                  # strided, no margin
     other[...] = gaussian(volume, 1.0)
     assert np.array_equal(checked_grid_curvature(other, entry, h, 0.3, padding, owned=True),

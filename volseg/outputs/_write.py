@@ -35,7 +35,7 @@ def write_result_files(paths: dict, result, values, info: dict, *, frame: Frame 
     k = int(result.n_regions)
     # Cast once, for every writer that takes them (NIfTI, Zarr, NGFF, ParaView); lazy
     # arrays stay lazy.
-    arrays = {"labels": result.labels.astype(label_type(k)),
+    arrays = {"labels": result.labels.astype(label_type(k), copy=False),
               "curvature": result.curvature.astype(np.float32)}
     curve = (result.report.curve, result.report.curve.n_components, result.threshold)
     # The writers run at once: ISA-L's gzip releases the GIL while it compresses (two
