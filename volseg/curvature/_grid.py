@@ -154,9 +154,10 @@ def checked_grid_curvature(data, entry, spacing, value_scale, padding, *,
     return out
 
 
-#: In-memory slabs hold about 1/SLABS of the volume each, at least MIN_SLAB voxels thick
-#: (each kernel call's parallel loop then has 16+ cube slabs per turn for 2 threads).
-SLABS, MIN_SLAB = 16, 32
+#: In-memory slabs hold about 1/SLABS of the volume each, at least MIN_SLAB voxels thick:
+#: each slab's halo adds one cube slab of work to its MIN_SLAB or more (384^3, one
+#: process, alternating: within 5 % of the whole volume at once, host noise 20 %).
+SLABS, MIN_SLAB = 8, 64
 
 
 def slab_thickness(shape) -> int:
