@@ -5,13 +5,14 @@ tetrahedra on both sides of each lie within one step). So each block of the inpu
 gets a 1-voxel halo of its neighbours' raw values (`volseg._halo`: their shells, so
 no block stays in memory for its neighbours' sake, and in the input's own type: 1
 byte per voxel for uint8), and then, inside its task: scaled, padded where it meets
-the volume's boundary exactly as the in-memory path pads the whole volume (axis by
-axis, by the `padding` rule, the same arithmetic), and run through the in-memory
-kernel, keeping its interior. The value scale, a global statistic, is computed first
-(one pass for min and max). Each block runs its slabs in the parity order they have
-in the whole volume, so every voxel's sums are added in the in-memory order and the
-result is bit-identical (tested). One task per block and stage, no padded copy of
-the volume, no final rechunk.
+the volume's boundary as np.pad pads the whole volume (axis by axis, by the
+`padding` rule, the same arithmetic), and run through the kernel, keeping its
+interior. The value scale, a global statistic, is computed first (one pass for min
+and max). Each block runs its slabs in the parity order they have in the whole
+volume, so every voxel's sums are added in the whole volume's order and the result is
+bit-identical (tested). One task per block and stage, no padded copy of the volume,
+no final rechunk. The in-memory path runs the same `BlockCurvature` on slabs of the
+first axis (`_grid.checked_grid_curvature`).
 """
 
 from __future__ import annotations
