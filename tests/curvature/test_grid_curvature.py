@@ -131,8 +131,8 @@ def test_slabs_give_the_whole_volumes_curvature_bit_for_bit(shape, padding, rng,
     once for every operator and slab thickness (1 voxel up), one-voxel axes, both
     paddings, anisotropic spacing, integer and float inputs; the result starts a
     buffer with room for it padded."""
+    from volseg._buffers import room_to_pad
     from volseg.curvature import _grid, checked_grid_curvature, get_operator
-    from volseg.morse._graph import room_to_pad
 
     h = (1.0, 0.7, 1.3)
     f = rng.standard_normal(shape) * 10.0 ** rng.integers(-3, 3, shape)

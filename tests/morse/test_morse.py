@@ -475,6 +475,36 @@ def test_a_build_in_the_fields_buffer_gives_it_back_when_it_fails(rng, monkeypat
     assert field.tobytes() == values.tobytes()
 
 
+@pytest.mark.parametrize("after_the_move", [False, True])
+def test_an_interrupt_during_the_move_gives_the_field_back(after_the_move, rng,
+                                                           monkeypatch):
+    """A KeyboardInterrupt after any number of slabs moved to their padded places,
+    raised before or after the slab it interrupts has moved: the field as it was."""
+    from volseg.morse._graph import PaddedInPlace
+
+    values = smooth_random_field((7, 4, 5), rng)
+    values[0, 0, :2] = -0.0, np.nan
+    mask = np.isfinite(values)
+    move_up = PaddedInPlace._move_up
+    for moved in range(len(values)):
+        calls = []
+
+        def interrupted(self, x, moved=moved, calls=calls):
+            if len(calls) == moved:
+                if after_the_move:
+                    move_up(self, x)
+                raise KeyboardInterrupt
+            calls.append(x)
+            move_up(self, x)
+
+        field = _in_a_padded_buffer(values)
+        with monkeypatch.context() as patched:
+            patched.setattr(PaddedInPlace, "_move_up", interrupted)
+            with pytest.raises(KeyboardInterrupt):
+                descending_complex(field, mask=mask, overwrite_field=True)
+        assert field.tobytes() == values.tobytes(), moved
+
+
 def test_a_field_without_room_is_copied_not_overwritten(rng):
     """`overwrite_field` on fields it cannot use (no room, another type, order or
     dimension, a view inside a buffer): the copy's build, the field untouched."""
@@ -498,7 +528,7 @@ def test_the_pipelines_field_is_built_in_its_own_buffer():
     (8 bytes a voxel less at the Morse stage's peak), for a smoothed integer volume
     (the smoothing's buffer) and a float one (the curvature's own)."""
     from volseg import segment_volume
-    from volseg.morse._graph import room_to_pad
+    from volseg._buffers import room_to_pad
 
     rng = np.random.default_rng(3)
     for volume in (rng.integers(0, 255, (12, 10, 9)).astype(np.uint8),

@@ -6,6 +6,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .. import _validate
+from .._buffers import margin_owner, with_room
 from ._registry import get_operator
 
 __all__ = ["grid_curvature", "default_value_scale", "checked_grid_curvature", "check_padding"]
@@ -127,17 +128,16 @@ def checked_grid_curvature(data, entry, spacing, value_scale, padding, *,
     (24 bytes a voxel for the weighted operator). The result starts a buffer with
     room for it padded by one voxel (the owned buffer: each slab is read before the
     result reaches it; else a new one, its tail untouched), where the Morse build
-    pads it in place (`volseg.morse._graph.room_to_pad`)."""
+    pads it in place (`volseg._buffers.room_to_pad`)."""
     if _validate.is_lazy(data):
         from ._grid_blocks import dask_grid_curvature
 
         return dask_grid_curvature(data, entry, spacing, value_scale, padding, block_hooks)
     from ._grid_blocks import BlockCurvature
 
-    owner = _margin_buffer(data) if owned else None
-    room = owner.reshape(-1) if owner is not None else np.empty(
-        int(np.prod([n + 2 for n in data.shape])))
-    out = room[:data.size].reshape(data.shape)
+    owner = margin_owner(data) if owned else None
+    out = with_room(data.shape) if owner is None else \
+        owner.reshape(-1)[:data.size].reshape(data.shape)
     nx = data.shape[0]
     thick = slab_thickness(data.shape)
     starts = [list(range(0, nx, thick)), [0], [0]]
@@ -177,16 +177,3 @@ def _scaled_slab(data, x0: int, x1: int, value_scale: float, room):
     inner[...] = data[lo:hi]
     inner *= value_scale
     return block
-
-
-def _margin_buffer(data):
-    """The C-contiguous float64 buffer whose interior (a 1-voxel margin) `data` is, or None."""
-    base = data.base
-    if (not isinstance(base, np.ndarray) or base.dtype != np.float64 or base.base is not None
-            or not base.flags.c_contiguous or data.dtype != np.float64
-            or base.shape != tuple(n + 2 for n in data.shape)):
-        return None
-    inner = base[(slice(1, -1),) * base.ndim]
-    same = (inner.__array_interface__["data"] == data.__array_interface__["data"]
-            and inner.strides == data.strides)
-    return base if same else None

@@ -10,10 +10,11 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .._buffers import room_to_pad
 from .._distinct import index_type
 from . import _kernels as kernels
 from ._edges import _cross_edges, _saddle_order, spanning_forest
-from ._graph import PaddedInPlace, _Neighbourhood, _neighbourhood, _validate_field, room_to_pad
+from ._graph import PaddedInPlace, _Neighbourhood, _neighbourhood, _validate_field
 from ._hierarchy import MorseHierarchy
 from ._phases import _Phases
 

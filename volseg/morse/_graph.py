@@ -10,6 +10,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .. import _kuhn
+from .._buffers import padded_size
 from .._distinct import distinct, index_type
 
 __all__ = ["grid_offsets"]
@@ -197,48 +198,35 @@ def _grid_graph(padded, mask, connectivity) -> _Neighbourhood:
                           dummy, dummy, padded.shape)
 
 
-def room_to_pad(values):
-    """The flat float64 buffer that `values` (a 3-D C-ordered float64 array) starts,
-    when it holds `values` padded by one voxel on every side; else None.
-    `volseg.curvature` leaves its grid result so (`_grid.checked_grid_curvature`)."""
-    owner = values.base
-    if (values.ndim != 3 or values.dtype != np.float64 or not values.flags.c_contiguous
-            or not isinstance(owner, np.ndarray) or owner.base is not None
-            or owner.dtype != np.float64 or not owner.flags.c_contiguous
-            or owner.size < np.prod([n + 2 for n in values.shape])
-            or owner.__array_interface__["data"][0] != values.__array_interface__["data"][0]):
-        return None
-    return owner.reshape(-1)
-
-
 class PaddedInPlace:
     """The grid neighbourhood of a 3-D float64 field built in the field's own buffer
-    (`room_to_pad`): no 8-byte-a-voxel padded copy. Entering moves the values to their
-    padded places (each to a higher address, last first), writes -inf around them and
-    outside the mask (those values kept aside); leaving moves them back (first first)
-    and restores the kept ones, whatever happened inside: the field holds its own
+    (`volseg._buffers.room_to_pad`): no 8-byte-a-voxel padded copy. Entering moves the
+    values to their padded places slab by slab (each to a higher address, last first),
+    writes -inf around them and outside the mask (those values kept aside); leaving
+    moves back the slabs moved (first first) and restores the kept values, whatever
+    happened inside, an interrupt during the move included: the field holds its own
     values again, bit for bit. Nothing else may read the field meanwhile."""
 
     def __init__(self, values, buffer, mask, connectivity):
         self.values, self.buffer, self.mask = values, buffer, mask
         self.connectivity, self._kept = connectivity, None
         shape = values.shape
-        self._padded = buffer[:int(np.prod([n + 2 for n in shape]))].reshape(
-            tuple(n + 2 for n in shape))
+        self._padded = buffer[:padded_size(shape)].reshape(tuple(n + 2 for n in shape))
         self._flat = buffer[:values.size].reshape(shape[0], -1)
+        self._moved = len(self._flat)        # slabs from here on are in padded places
 
     def __enter__(self) -> _Neighbourhood:
-        padded, flat, n1, n2 = self._padded, self._flat, *self.values.shape[1:]
-        inner = padded[1:-1, 1:-1, 1:-1]
-        # Every padded slab starts above the end of its flat slab and of all before it.
-        for x in range(len(flat) - 1, -1, -1):
-            inner[x] = flat[x].reshape(n1, n2)
+        padded = self._padded
         try:
+            # Every padded slab starts above the end of its flat slab and all before it.
+            for x in range(len(self._flat) - 1, -1, -1):
+                self._move_up(x)
+                self._moved = x
             for axis in range(3):
                 edges = (slice(None),) * axis
                 padded[(*edges, 0)] = padded[(*edges, -1)] = -np.inf
             if self.mask is not None:
-                outside = ~self.mask
+                inner, outside = padded[1:-1, 1:-1, 1:-1], ~self.mask
                 self._kept = inner[outside]
                 inner[outside] = -np.inf
             return _grid_graph(padded, self.mask, self.connectivity)
@@ -249,11 +237,14 @@ class PaddedInPlace:
     def __exit__(self, *exc) -> None:
         self._back()
 
+    def _move_up(self, x: int) -> None:
+        self._padded[x + 1, 1:-1, 1:-1] = self._flat[x].reshape(self.values.shape[1:])
+
     def _back(self) -> None:
-        padded, flat, n1, n2 = self._padded, self._flat, *self.values.shape[1:]
-        inner = padded[1:-1, 1:-1, 1:-1]
-        for x in range(len(flat)):           # every flat slab ends below its padded one
-            flat[x] = inner[x].reshape(n1 * n2)
-        if self._kept is not None:
-            self.values[~self.mask] = self._kept
+        inner, flat = self._padded[1:-1, 1:-1, 1:-1], self._flat
+        if self._kept is not None:           # gathered after the whole move
+            inner[~self.mask] = self._kept
             self._kept = None
+        for x in range(self._moved, len(flat)):  # every flat slab ends below its padded one
+            flat[x] = inner[x].reshape(-1)
+        self._moved = len(flat)
