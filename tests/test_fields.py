@@ -118,3 +118,74 @@ def test_every_field_is_a_registry_entry():
     for name in FIELDS:
         entry = get_field(name)
         assert entry.name == name and entry.sign in (1.0, -1.0) and entry.halo in (0, 1)
+
+
+@pytest.mark.parametrize("shape", [(7, 5, 4), (2, 3, 4), (1, 4, 3), (6, 1, 1)])
+def test_the_in_memory_gradient_in_slabs_is_the_whole_volumes(shape, rng, monkeypatch):
+    """The numpy gradient, slab by slab with halos, equals `_gradient_block` of the whole
+    volume at once, bit for bit, for every slab thickness (1 voxel up), with and without
+    a mask, normalised per slab or not; the result has room for the Morse padding."""
+    from volseg import _buffers, fields
+    from volseg._buffers import room_to_pad
+
+    spacing = (0.7, 1.0, 1.3)
+    values = (rng.random(shape) * 300).astype(np.float32)
+    span = (float(values.min()) - 2.5, float(values.max()))
+    for mask in (None, rng.random(shape) > 0.3):
+        whole = fields._gradient_block(values.astype(np.float64), mask, spacing=spacing)
+        normal = fields._gradient_block(fields.normalised(values, span), mask,
+                                        spacing=spacing)
+        for thick in range(1, shape[0] + 1):
+            monkeypatch.setattr(_buffers, "MIN_SLAB", thick)
+            got = gradient_magnitude(values, spacing, mask)
+            assert got.tobytes() == whole.tobytes(), thick
+            assert room_to_pad(got) is not None
+            low, high = span
+            got = fields._gradient_in_slabs(values, spacing, mask, (low, high - low))
+            assert got.tobytes() == normal.tobytes(), thick
+
+
+def test_the_value_field_and_the_negated_gradient_have_room_to_pad(rng):
+    """The value field (|f| on a signed map) is `normalised`'s numbers in a buffer with
+    room for the Morse padding, and so is the gradient's negation: the Morse build pads
+    them in place; an int8 -128 is 128 in |f| (not numpy's int8 overflow)."""
+    from volseg import fields
+    from volseg._buffers import room_to_pad
+
+    entry = get_field("value")
+    for values, span in ((rng.random((5, 4, 3)) * 7 - 2, (-2.0, 5.0)),
+                         (rng.random((5, 4, 3)).astype(np.float32) + 1, (1.0, 2.0)),
+                         (rng.integers(0, 9, (5, 4, 3)).astype(np.uint16), (0, 8))):
+        low, high = span
+        signed = low < 0 < high
+        want = fields.normalised(np.abs(values) if signed else values,
+                                 (0.0, max(-low, high)) if signed else span)
+        got = entry.make(values, span, None, None, None)
+        assert got.tobytes() == want.tobytes() and room_to_pad(got) is not None
+    ints = np.array([-128, -1, 0, 127], np.int8).reshape(4, 1, 1)
+    np.testing.assert_array_equal(entry.make(ints, (-128, 127), None, None, None).ravel(),
+                                  [1.0, 1 / 128, 0.0, 127 / 128])
+    gradient = get_field("gradient")
+    field = gradient_magnitude(rng.random((5, 4, 3)), (1, 1, 1))
+    negated = fields.for_morse(gradient, field)
+    assert negated.tobytes() == (-field).tobytes() and room_to_pad(negated) is not None
+    assert fields.for_morse(get_field("curvature"), field) is field
+
+
+@pytest.mark.parametrize("field", ["gradient", "value"])
+def test_the_pipelines_gradient_and_value_are_built_in_their_own_buffers(field, rng,
+                                                                          monkeypatch):
+    """`segment_volume` by the gradient or the value builds the complex in the field's
+    own buffer (no padded copy): the copy's path is never taken, and the labels are
+    those of the Morse stage on a copy of the field."""
+    from volseg.morse import _build, descending_complex
+
+    volume = _phantom(rng)
+    want = segment_volume(volume, field=field, n_regions=2, mask="otsu")
+    with monkeypatch.context() as patched:
+        patched.setattr(_build, "_neighbourhood", None)
+        got = segment_volume(volume, field=field, n_regions=2, mask="otsu")
+    np.testing.assert_array_equal(got.labels, want.labels)
+    sign = get_field(field).sign
+    copied = descending_complex(sign * want.curvature.copy(), mask=want.mask.mask)
+    np.testing.assert_array_equal(copied.persistence, got.hierarchy.persistence)

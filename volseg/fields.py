@@ -33,7 +33,7 @@ from typing import Callable
 
 import numpy as np
 
-from . import _validate
+from . import _buffers, _validate
 from ._registry import Registry
 
 __all__ = ["Field", "FIELD_REGISTRY", "FIELDS", "get_field", "field_entry", "given",
@@ -71,11 +71,15 @@ class Field:
 def normalised(values, span):
     """`values` minus their minimum over their range (the input's (min, max) `span`):
     0..1, the same for every exactly scaled or offset copy of a volume."""
-    low, high = (float(v) for v in span)
-    width = high - low if high > low else 1.0
+    low, width = _low_width(span)
     if _validate.is_lazy(values):
         return values.map_blocks(_normalised_block, low, width, dtype=np.float64)
     return _normalised_block(np.asarray(values), low, width)
+
+
+def _low_width(span) -> tuple[float, float]:
+    low, high = (float(v) for v in span)
+    return low, high - low if high > low else 1.0
 
 
 def _normalised_block(block, low, width):
@@ -88,7 +92,8 @@ def gradient_magnitude(values, spacing, mask=None):
     difference never reaches outside it: one-sided at the mask's border, 0 for a voxel
     with no masked neighbour along an axis, so the mask's edge (a skull-stripped
     brain's rim, a CT's air) makes no basin walls of its own. A Dask array block by
-    block with a one-voxel halo (none past the border), equal to numpy's exactly."""
+    block with a one-voxel halo (none past the border), equal to numpy's exactly; a
+    numpy array slab by slab so (a slab's temporaries, not the volume's)."""
     spacing = tuple(float(s) for s in spacing)
     if _validate.is_lazy(values):
         if mask is None:
@@ -99,8 +104,27 @@ def gradient_magnitude(values, spacing, mask=None):
         mask = da.asarray(mask).rechunk(values.chunks)
         return da.map_overlap(_gradient_block, values, mask, depth=1, boundary="none",
                               dtype=np.float64, spacing=spacing)
-    return _gradient_block(np.asarray(values, dtype=np.float64),
-                           None if mask is None else np.asarray(mask, bool), spacing=spacing)
+    return _gradient_in_slabs(np.asarray(values), spacing,
+                              None if mask is None else np.asarray(mask, bool))
+
+
+def _gradient_in_slabs(values, spacing, mask, normalise=None):
+    """`_gradient_block` of a numpy volume, slab by slab along its first axis, each with
+    a one-voxel halo (none past the border) as the Dask path's blocks: the same
+    numbers, with one slab's temporaries (several float64 arrays of its size) instead
+    of the volume's. `normalise`: (low, width), applied to each slab first. The result
+    starts a buffer with room for the Morse build's padding (`volseg._buffers`)."""
+    out = _buffers.with_room(values.shape)
+    nx = values.shape[0]
+    thick = _buffers.slab_thickness(values.shape)
+    for x0 in range(0, nx, thick):
+        x1 = min(x0 + thick, nx)
+        lo, hi = max(x0 - 1, 0), min(x1 + 1, nx)
+        block = _normalised_block(values[lo:hi], *normalise) if normalise \
+            else np.asarray(values[lo:hi], dtype=np.float64)
+        out[x0:x1] = _gradient_block(block, None if mask is None else mask[lo:hi],
+                                     spacing=spacing)[x0 - lo:x1 - lo]
+    return out
 
 
 def _gradient_block(block, mask=None, *, spacing):
@@ -140,15 +164,29 @@ def _curvature(values, span, request, scale, hooks, mask=None, owned=False):
 
 
 def _gradient(values, span, request, scale, hooks, mask=None, owned=False):
-    return gradient_magnitude(normalised(values, span), request.spacing, mask)
+    if _validate.is_lazy(values):
+        return gradient_magnitude(normalised(values, span), request.spacing, mask)
+    return _gradient_in_slabs(np.asarray(values), tuple(map(float, request.spacing)), mask,
+                              _low_width(span))
 
 
 def _value(values, span, request, scale, hooks, mask=None, owned=False):
     low, high = (float(v) for v in span)
-    if low < 0 < high:                      # a signed map: bright and dark blobs
-        field = abs(values) if _validate.is_lazy(values) else np.abs(values)
-        return normalised(field, (0.0, max(-low, high)))
-    return normalised(values, span)
+    signed = low < 0 < high                 # a signed map: bright and dark blobs
+    if signed:
+        span = (0.0, max(-low, high))
+    if _validate.is_lazy(values):
+        return normalised(abs(values) if signed else values, span)
+    # In a buffer with room for the Morse build's padding: the same numbers as
+    # `normalised` (|f| taken in float64, where it cannot overflow an integer type).
+    out = _buffers.with_room(values.shape)
+    out[...] = values
+    if signed:
+        np.abs(out, out=out)
+    low, width = _low_width(span)
+    out -= low
+    out /= width
+    return out
 
 
 FIELD_REGISTRY = Registry("field", [
@@ -191,7 +229,10 @@ def field_entry(field) -> Field:
 
 
 def for_morse(entry: Field, field):
-    """The array the complex is built on: ``entry.sign * field``, lazily for Dask."""
+    """The array the complex is built on: ``entry.sign * field``, lazily for Dask; a
+    numpy negation in a buffer with room for the Morse build's padding."""
     if entry.sign > 0:
         return field
-    return -field
+    if _validate.is_lazy(field):
+        return -field
+    return np.negative(field, out=_buffers.with_room(field.shape))

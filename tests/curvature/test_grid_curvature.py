@@ -131,8 +131,9 @@ def test_slabs_give_the_whole_volumes_curvature_bit_for_bit(shape, padding, rng,
     once for every operator and slab thickness (1 voxel up), one-voxel axes, both
     paddings, anisotropic spacing, integer and float inputs; the result starts a
     buffer with room for it padded."""
+    from volseg import _buffers
     from volseg._buffers import room_to_pad
-    from volseg.curvature import _grid, checked_grid_curvature, get_operator
+    from volseg.curvature import checked_grid_curvature, get_operator
 
     h = (1.0, 0.7, 1.3)
     f = rng.standard_normal(shape) * 10.0 ** rng.integers(-3, 3, shape)
@@ -140,7 +141,7 @@ def test_slabs_give_the_whole_volumes_curvature_bit_for_bit(shape, padding, rng,
         for operator in ALL:
             want = _whole_volume_at_once(volume, operator, padding, 0.37, h)
             for thick in range(1, shape[0] + 1):
-                monkeypatch.setattr(_grid, "MIN_SLAB", thick)
+                monkeypatch.setattr(_buffers, "MIN_SLAB", thick)
                 got = checked_grid_curvature(volume, get_operator(operator), h, 0.37, padding)
                 assert got.tobytes() == want.tobytes(), (operator, thick, volume.dtype)
                 assert room_to_pad(got) is not None
@@ -154,14 +155,15 @@ def test_an_owned_smoothed_buffer_gives_the_same_curvature(operator, padding, rn
     result in its own buffer (`owned`), equals the one of a copy, bit for bit, for
     any slab thickness (each slab is read before the result reaches its rows); a view
     that is not a margin buffer's interior is copied as before."""
+    from volseg import _buffers
     from volseg._smoothing import gaussian
-    from volseg.curvature import _grid, checked_grid_curvature, get_operator
+    from volseg.curvature import checked_grid_curvature, get_operator
 
     volume = (255 * rng.random((13, 11, 9))).astype(np.uint8)
     entry, h = get_operator(operator), (0.7, 1.0, 1.3)
     expected = _whole_volume_at_once(gaussian(volume, 1.0), operator, padding, 0.3, h)
     for thick in (1, 2, 3, 5, 13):
-        monkeypatch.setattr(_grid, "MIN_SLAB", thick)
+        monkeypatch.setattr(_buffers, "MIN_SLAB", thick)
         owned = gaussian(volume, 1.0, margin=1)
         assert owned.base.shape == (15, 13, 11)
         result = checked_grid_curvature(owned, entry, h, 0.3, padding, owned=True)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .. import _validate
+from .. import _buffers, _validate
 from .._buffers import margin_owner, with_room
 from ._registry import get_operator
 
@@ -139,7 +139,7 @@ def checked_grid_curvature(data, entry, spacing, value_scale, padding, *,
     out = with_room(data.shape) if owner is None else \
         owner.reshape(-1)[:data.size].reshape(data.shape)
     nx = data.shape[0]
-    thick = slab_thickness(data.shape)
+    thick = _buffers.slab_thickness(data.shape)
     starts = [list(range(0, nx, thick)), [0], [0]]
     kernel = BlockCurvature(entry, spacing, value_scale, padding, starts, data.shape)
     # One slab's and one accumulator's memory, reused by every slab.
@@ -152,17 +152,6 @@ def checked_grid_curvature(data, entry, spacing, value_scale, padding, *,
         # Written behind every row a later slab reads (in an owned buffer).
         kernel.of_scaled(fp, (k, 0, 0), out[x0:x1], acc_room)
     return out
-
-
-#: In-memory slabs hold about 1/SLABS of the volume each, at least MIN_SLAB voxels thick:
-#: each slab's halo adds one cube slab of work to its MIN_SLAB or more (384^3, one
-#: process, alternating: within 5 % of the whole volume at once, host noise 20 %).
-SLABS, MIN_SLAB = 8, 64
-
-
-def slab_thickness(shape) -> int:
-    """The thickness (first axis) of the in-memory curvature's slabs."""
-    return max(MIN_SLAB, -(-shape[0] // SLABS))
 
 
 def _scaled_slab(data, x0: int, x1: int, value_scale: float, room):
