@@ -64,3 +64,21 @@ def test_index_type_is_int32_up_to_its_largest_value_then_int64():
     for largest in (0, 7, top, top + 1):
         info = np.iinfo(index_type(largest))
         assert info.min <= -1 and largest <= info.max
+
+
+def test_counts_in_chunks_are_bincounts(monkeypatch):
+    """`counts` chunk by chunk equals ``np.bincount`` for every id type and chunk
+    length, with ids above `minlength` in a later chunk than the first."""
+    from volseg import _distinct
+
+    rng = np.random.default_rng(4)
+    ids = rng.integers(0, 9, (5, 4, 3))
+    ids[-1, -1, -1] = 30
+    for chunk in (1, 7, 60, 1000):
+        monkeypatch.setattr(_distinct, "COUNT_CHUNK", chunk)
+        for dtype in (np.uint8, np.uint16, np.int32, np.int64):
+            for minlength in (0, 12, 40):
+                got = _distinct.counts(ids.astype(dtype), minlength)
+                want = np.bincount(ids.ravel(), minlength=minlength)
+                assert got.dtype == np.int64
+                np.testing.assert_array_equal(got, want)

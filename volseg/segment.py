@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 from . import _validate
 from ._block_hooks import BlockHooks
 from ._block_hooks import compute as _compute
+from ._distinct import counts
 from ._lattice import lattice_of, on_lattice
 from ._smoothing import gaussian, noise_sigma
 from .curvature import (
@@ -153,11 +154,7 @@ class Segmentation:
     def region_sizes(self) -> NDArray[np.int64]:
         """(k + 1,) voxels (or vertices) per label, label 0 first (one pass over the
         blocks of lazy labels)."""
-        if _validate.is_lazy(self.labels):
-            import dask.array as da
-
-            return da.bincount(self.labels.ravel(), minlength=self.n_regions + 1).compute()
-        return np.bincount(self.labels.ravel(), minlength=self.n_regions + 1)
+        return _label_sizes(self.labels, self.n_regions)
 
     def region_table(self) -> list[dict]:
         """One entry per region: ``label`` (1..k), ``size`` (voxels or vertices),
@@ -553,7 +550,7 @@ def _unless_degenerate(hierarchy, cut: CutRequest, labels, report: CutReport) ->
 def _label_sizes(labels, n_regions: int) -> np.ndarray:
     """Voxels per label 0..k of labels in memory or lazy (one pass)."""
     if not _validate.is_lazy(labels):
-        return np.bincount(np.asarray(labels).ravel(), minlength=n_regions + 1)
+        return counts(labels, n_regions + 1)
     import dask.array as da
 
     return da.bincount(labels.ravel(), minlength=n_regions + 1).compute()
@@ -784,7 +781,7 @@ def _warn_if_degenerate(result: Segmentation, dtype) -> None:
     from .metrics import region_spread
     from .outputs import degenerate_cut_warning
 
-    sizes = np.bincount(np.asarray(result.labels).ravel())[1:]
+    sizes = result.region_sizes()[1:]
     if sizes.sum() == 0:
         return
     line = degenerate_cut_warning("the volume", result, region_spread(sizes), dtype)

@@ -103,6 +103,41 @@ def test_blockwise_equals_in_memory_on_uneven_chunks():
                                       np.asarray(lazy.segment(n_regions=9, measure=measure)))
 
 
+def test_in_memory_records_in_chunks_are_one_vertex_each(rng, monkeypatch):
+    """`records` on a grid, chunk by chunk (chunks of 1, 7 and 1000 vertices): one
+    record per vertex inside the mask, in flat order, with its cell, its rank (the
+    count of events with a saddle above it) and its fixed-point steps, cells and
+    ranks as int32 and counts implicit; the extinctions and cells' areas are those
+    of the whole field at once."""
+    from volseg.morse import _basins, _measures
+
+    f = np.round(rng.random((9, 8, 7)) * 40) / 8               # ties at saddles
+    mask = rng.random(f.shape) > 0.2
+    h = descending_complex(f, mask=mask)
+    cells, field = h.cells.ravel(), h._field.ravel()
+    inside = cells >= 0
+    want_rank = np.array([np.sum(h.saddle_value > v) for v in field[inside]])
+    low, high = field[inside].min(), field[inside].max()
+    unit = _measures.unit_of(low, high)
+    want_steps = np.floor((field[inside] - low) / unit).astype(np.int64)
+    extinctions = None
+    for chunk in (1, 7, 1000):
+        monkeypatch.setattr(_basins, "RECORD_CHUNK", chunk)
+        got = _basins.records(h.cells, h._field, h.saddle_value, None, _measures.unit_of,
+                              _measures.scale_of)
+        assert got.cell.dtype == got.rank.dtype == np.int32 and len(got.count) == 0
+        np.testing.assert_array_equal(got.cell, cells[inside])
+        np.testing.assert_array_equal(got.rank, want_rank)
+        np.testing.assert_array_equal(got.sums, want_steps)
+        np.testing.assert_array_equal(got.values, np.bincount(cells[inside]))
+        fresh = descending_complex(f, mask=mask)
+        now = [fresh.extinction(m) for m in ("area", "volume")]
+        if extinctions is not None:
+            for a, b in zip(now, extinctions, strict=True):
+                np.testing.assert_array_equal(a, b)
+        extinctions = now
+
+
 def test_segment_volume_blockwise_equal_for_every_field():
     rng = np.random.default_rng(4)
     x, y, z = np.meshgrid(*[np.arange(n) for n in (30, 26, 22)], indexing="ij")

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from .._distinct import slot_of
+from .._distinct import counts, index_type, slot_of
 from .._sizes import SizedByArrays
 from .._union_find import find_root
 from ._kernels import counting_sort
@@ -38,10 +38,11 @@ __all__ = ["Basins", "records", "block_records", "joined", "saliency", "merge_or
 
 @dataclass(frozen=True)
 class Basins(SizedByArrays):
-    """The vertices of a field summed per (cell, rank): `cell`, `rank` (R,) int64,
-    `count` (R,) (vertices, or their weights on a mesh), `sums` (R,) of the vertices'
-    values in fixed point (`low` + `unit` x steps; on a mesh, weight x value as
-    floats), `scale` what one step of area x `unit` counts (the vertex weight)."""
+    """The vertices of a field summed per (cell, rank): `cell`, `rank` (R,) of one
+    integer type (`_index`), `count` (R,) (vertices, or their weights on a mesh; empty
+    when every record is one vertex, as in memory on a grid), `sums` (R,) of the
+    vertices' values in fixed point (`low` + `unit` x steps; on a mesh, weight x value
+    as floats), `scale` what one step of area x `unit` counts (the vertex weight)."""
 
     cell: np.ndarray
     rank: np.ndarray
@@ -55,14 +56,23 @@ class Basins(SizedByArrays):
     def values(self) -> np.ndarray:
         """(M,) each cell's area, as `MorseHierarchy.cell_measure` reports it."""
         n = int(self.cell.max(initial=-1)) + 1
+        if len(self.count) == 0:                        # one vertex per record
+            return counts(self.cell, n) * self.scale
         return np.bincount(self.cell, weights=self.count, minlength=n) * self.scale
+
+
+def _index(cell_max: int, n_events: int):
+    """The type of a `Basins`' cells and ranks: int32 where they fit (half the memory
+    of one record per vertex), else int64; the same rule in memory and blockwise, so
+    `_sweep` compiles once."""
+    return index_type(max(cell_max, n_events) + 1)
 
 
 def ranks_of(values, saddle_value) -> np.ndarray:
     """(N,) int64: the count of events with a saddle above each value (events in sweep
     order, saddles non-increasing)."""
     return np.searchsorted(-np.asarray(saddle_value, np.float64), -np.asarray(values),
-                           side="left").astype(np.int64)
+                           side="left").astype(np.int64, copy=False)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -116,26 +126,49 @@ def joined(parts, n_events: int, low: float, unit: float, scale: float) -> Basin
     counts = np.concatenate([p[1] for p in parts]) if parts else np.zeros(0, np.int64)
     sums = np.concatenate([p[2] for p in parts]) if parts else np.zeros(0, np.int64)
     n_ranks = np.int64(n_events + 1)
-    return Basins(keys // n_ranks, keys % n_ranks, counts, sums, low, unit, scale)
+    cell, rank = keys // n_ranks, keys % n_ranks
+    index = _index(int(cell.max(initial=0)), n_events)
+    return Basins(cell.astype(index), rank.astype(index), counts, sums, low, unit, scale)
+
+
+#: Vertices per chunk of `records`: its temporaries (a few arrays of this length) are
+#: bounded, not a volume's.
+RECORD_CHUNK = 1 << 22
 
 
 def records(cells, field, saddle_value, weight, unit_of, scale_of) -> Basins:
     """`Basins` of a field in memory: one record per vertex (no table: the sweep's
     counting sort by rank is the grouping), fixed point on a grid (`weight` None or a
     number; the step ``unit_of(low, high)``, an area step ``scale_of(weight, 1)``),
-    float sums weighted per vertex on a mesh (`weight` one per vertex)."""
+    float sums weighted per vertex on a mesh (`weight` one per vertex).
+
+    On a grid a record is its cell and rank (`_index`: int32 where they fit) and its
+    int64 steps, 16 bytes a vertex, filled chunk by chunk (`RECORD_CHUNK`): at 512^3
+    the records and their temporaries took 40 bytes a voxel or more."""
     cells, field = np.ravel(cells), np.ravel(field)
-    inside = cells >= 0
-    cell = cells[inside].astype(np.int64)
-    values = field[inside]
-    rank = ranks_of(values, saddle_value)
+    index = _index(int(cells.max(initial=0)), len(saddle_value))
     if weight is not None and np.ndim(weight) > 0:
+        inside = cells >= 0
+        values = field[inside]
         w = np.asarray(weight, np.float64)[inside]
-        return Basins(cell, rank, w, w * values, 0.0, 1.0, 1.0)
+        return Basins(cells[inside].astype(index), ranks_of(values, saddle_value).astype(index),
+                      w, w * values, 0.0, 1.0, 1.0)
     low, high = masked_range(cells, field)
     unit = unit_of(low, high)
-    return Basins(cell, rank, np.ones(len(cell), np.int64), _steps(values, low, unit), low,
-                  unit, scale_of(weight, 1.0))
+    n = sum(int(np.count_nonzero(cells[a:a + RECORD_CHUNK] >= 0))
+            for a in range(0, len(cells), RECORD_CHUNK))
+    cell, rank, sums = np.empty(n, index), np.empty(n, index), np.empty(n, np.int64)
+    at = 0
+    for a in range(0, len(cells), RECORD_CHUNK):
+        chunk = cells[a:a + RECORD_CHUNK]
+        inside = chunk >= 0
+        values = field[a:a + RECORD_CHUNK][inside]
+        k = len(values)
+        cell[at:at + k] = chunk[inside]
+        rank[at:at + k] = ranks_of(values, saddle_value)
+        sums[at:at + k] = _steps(values, low, unit)
+        at += k
+    return Basins(cell, rank, np.zeros(0, np.int64), sums, low, unit, scale_of(weight, 1.0))
 
 
 @numba.njit(cache=True, nogil=True)
@@ -157,24 +190,26 @@ def saliency(basins: Basins, source, target, saddle_value, n_max: int,
     else:
         level = saddle_value
     out = np.empty(len(source), dtype=basins.sums.dtype)
+    order = np.empty(len(basins.rank), dtype=index_type(len(basins.rank)))
     _sweep(basins.cell, basins.rank, basins.count, basins.sums,
            np.asarray(source, np.int64), np.asarray(target, np.int64), level, n_max,
-           volume, out)
+           volume, order, out)
     return out
 
 
 @numba.njit(cache=True, nogil=True)
-def _sweep(cell, rank, count, sums, source, target, level, n_max, volume, out):
+def _sweep(cell, rank, count, sums, source, target, level, n_max, volume, order, out):
+    """`saliency`'s sweep; `count` empty: one vertex per record."""
     parent = np.arange(n_max)
     area = np.zeros(n_max, dtype=count.dtype)
     total = np.zeros(n_max, dtype=sums.dtype)
-    order = np.empty(len(rank), dtype=np.int64)
+    ones = len(count) == 0
     start = counting_sort(rank, len(source) + 1, order)
     for e in range(len(source)):
         for t in range(start[e], start[e + 1]):
             i = order[t]
             r = find_root(parent, cell[i])
-            area[r] += count[i]
+            area[r] += 1 if ones else count[i]
             total[r] += sums[i]
         a, b = find_root(parent, source[e]), find_root(parent, target[e])
         if volume:

@@ -210,8 +210,10 @@ class MorseHierarchy(SizedByArrays):
     def _cell_base(self, measure):
         """`cell_measure` before any pruning, computed once (a blockwise cut on the
         workers is given it: `with_cell_measures`): `_measures.Fixed`, or float sums
-        with a mesh's vertex weights."""
-        key = ("cells", measure)
+        with a mesh's vertex weights, or the `_basins.Basins` both watershed measures
+        read (computed once for the two: a cut by volume that falls back to area reads
+        the same records)."""
+        key = _base_key(measure)
         if key not in self._pruned:
             self._pruned[key] = (self._measure_cells or _measures.cell_measures)(self, measure)
         return self._pruned[key]
@@ -224,7 +226,7 @@ class MorseHierarchy(SizedByArrays):
         """The same hierarchy given each cell's measures ({measure: what
         `_measures.cell_measures` gives}), so that its cuts read no cell."""
         out = dataclasses.replace(self, _pruned={})
-        out._pruned.update({("cells", m): v if isinstance(v, _measures.Fixed | Basins)
+        out._pruned.update({_base_key(m): v if isinstance(v, _measures.Fixed | Basins)
                             else np.asarray(v, np.float64) for m, v in measures.items()})
         return out
 
@@ -647,3 +649,8 @@ def region_table(region, masked: bool):
         raise ValueError("only a hierarchy with a mask can drop components "
                          "(`min_component`): label 0 is outside the mask")
     return np.concatenate([region + 1, np.zeros(1, dtype=region.dtype)])
+
+
+def _base_key(measure) -> tuple:
+    """The cache key of a measure's cell base: one for both watershed measures."""
+    return ("cells", "watershed" if get_measure(measure).watershed else get_measure(measure).name)
