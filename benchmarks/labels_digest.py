@@ -1,5 +1,6 @@
 """Are the labels unchanged? Digests of the labels of the five shared datasets, for
-every cut measure, in memory and on a Dask array in uneven chunks, by this tree and
+every cut measure of the curvature and the default cut of the gradient and value
+fields, in memory and on a Dask array in uneven chunks, by this tree and
 by the code of another commit, side by side.
 
     python benchmarks/labels_digest.py --base 0b646ad      # compare with that commit
@@ -36,17 +37,20 @@ def digests(data: Path) -> dict:
     from volseg.morse import MEASURES
 
     out = {}
+    # The curvature by every measure; the other fields by their own defaults.
+    cases = [("curvature", m) for m in MEASURES] + [("gradient", None), ("value", None)]
     for path in sorted(data.glob("*.raw")):
         volume = read_volume(path)
-        for measure in MEASURES:
+        for field, measure in cases:
             for where in ("memory", "dask"):
                 given = (volume if where == "memory"
                          else da.from_array(np.asarray(volume.data), chunks=CHUNKS))
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore")
-                    result = segment_volume(given, measure=measure, spacing=volume.spacing)
+                    result = segment_volume(given, measure=measure, spacing=volume.spacing,
+                                            field=field)
                 labels = np.ascontiguousarray(np.asarray(result.labels), dtype=np.int64)
-                key = f"{path.name.split('_')[0]}/{measure}/{where}"
+                key = f"{path.name.split('_')[0]}/{field}/{measure or 'default'}/{where}"
                 out[key] = (hashlib.sha256(labels.tobytes()).hexdigest()[:16]
                             + f" k={int(labels.max())}")
                 print(key, out[key], file=sys.stderr, flush=True)

@@ -189,3 +189,21 @@ def test_the_pipelines_gradient_and_value_are_built_in_their_own_buffers(field, 
     sign = get_field(field).sign
     copied = descending_complex(sign * want.curvature.copy(), mask=want.mask.mask)
     np.testing.assert_array_equal(copied.persistence, got.hierarchy.persistence)
+
+
+def test_the_pipelines_gradient_comes_back_bit_for_bit_after_its_negation(rng):
+    """The pipeline lets the gradient go while the Morse stage reads its negation, and
+    gives it back as the negation's negation: the gradient magnitude exactly, zeros
+    +0.0 (no sign bit), and the hierarchy's field is its negation."""
+    from volseg.fields import normalised
+
+    volume = _phantom(rng)
+    volume[:4] = 90                                       # flat: zero gradient
+    result = segment_volume(volume, field="gradient", mask=None, smooth_sigma=0,
+                            n_regions=3, spacing=(0.5, 1.0, 2.0))
+    span = (float(volume.min()), float(volume.max()))
+    want = gradient_magnitude(normalised(volume, span), (0.5, 1.0, 2.0))
+    assert (want == 0).any()
+    assert result.curvature.tobytes() == want.tobytes()
+    assert not np.signbit(result.curvature).any()
+    assert result.hierarchy._field.tobytes() == (-want).tobytes()

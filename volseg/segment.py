@@ -482,9 +482,17 @@ def run_stages(data, request: SegmentRequest, storage: Storage | None = None, *,
     # The Morse stage needs the field alone: the smoothed and lattice copies (8 bytes
     # per voxel each) are let go before its own arrays are made.
     del values, data
+    morse_field = for_morse(entry, field)
+    # A negation in memory (the gradient's) is all the Morse stage and the cut read:
+    # the field goes too (8 bytes a voxel), and comes back after as its exact negation.
+    negated = morse_field is not field and not _validate.is_lazy(field)
+    if negated:
+        del field
     hierarchy, labels, report = _morse_and_cut(
-        for_morse(entry, field), request.cut, timings, mask=choice.mask, storage=storage,
+        morse_field, request.cut, timings, mask=choice.mask, storage=storage,
         vertex_weight=float(np.prod(request.spacing)), own_field=entry.name != GIVEN)
+    field = np.negative(morse_field) if negated else field
+    del morse_field
     result = Segmentation(labels, field, hierarchy, operator=request.operator.name,
                           value_scale=scale, spacing=request.spacing, timings=timings,
                           mask=choice, smooth_sigma=request.smooth_sigma,
