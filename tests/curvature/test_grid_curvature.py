@@ -109,16 +109,19 @@ def test_memory_layout_does_not_change_the_result(layout, rng):
     assert np.array_equal(grid_curvature(other, "weighted"), expected)
 
 
+#: The padding rules as np.pad's arguments: the reference the slabs are held to.
+NP_PAD = {"linear": {"mode": "reflect", "reflect_type": "odd"}, "mirror": {"mode": "reflect"}}
+
+
 def _whole_volume_at_once(volume, operator, padding, scale, h):
     """The curvature as the in-memory path computed it before its slabs: the whole
     volume scaled, padded by np.pad and run through the kernel at once."""
     from volseg.curvature import get_operator
-    from volseg.curvature._grid import _PADDING
     from volseg.curvature._grid_kernels import grid_kernel
     from volseg.curvature._grid_tables import _kernel_tables
 
     entry, h = get_operator(operator), np.asarray(h, dtype=np.float64)
-    fp = np.pad(volume.astype(np.float64) * scale, 1, **_PADDING[padding])
+    fp = np.pad(volume.astype(np.float64) * scale, 1, **NP_PAD[padding])
     acc = np.zeros((entry.grid_channels,) + fp.shape)
     grid_kernel(fp, h, entry.grid_code, _kernel_tables(h), acc)
     return entry.grid_finish(acc, INNER, h)

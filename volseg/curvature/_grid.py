@@ -11,7 +11,9 @@ from ._registry import get_operator
 
 __all__ = ["grid_curvature", "default_value_scale", "checked_grid_curvature", "check_padding"]
 
-_PADDING = {"linear": {"mode": "reflect", "reflect_type": "odd"}, "mirror": {"mode": "reflect"}}
+#: The padding rules beyond the volume's border (`_grid_blocks._pad`): linear
+#: extrapolation (np.pad's odd reflection) or a mirror (np.pad's reflection).
+PADDINGS = ("linear", "mirror")
 
 
 def default_value_scale(volume: ArrayLike, spacing=(1.0, 1.0, 1.0), *,
@@ -104,8 +106,8 @@ def grid_curvature(
 
 def check_padding(padding: str) -> str:
     """`padding` if it is a padding rule of `grid_curvature`, else a ValueError."""
-    if padding not in _PADDING:
-        raise ValueError(f"unknown `padding` {padding!r}; choose one of {', '.join(_PADDING)}")
+    if padding not in PADDINGS:
+        raise ValueError(f"unknown `padding` {padding!r}; choose one of {', '.join(PADDINGS)}")
     return padding
 
 
