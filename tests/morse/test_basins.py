@@ -138,6 +138,32 @@ def test_in_memory_records_in_chunks_are_one_vertex_each(rng, monkeypatch):
         extinctions = now
 
 
+def test_an_interrupt_in_the_records_cancels_the_chunks_not_started(monkeypatch):
+    """The records' chunks run on threads; an interrupt raised in one stops the rest
+    from starting (the pool is not drained first: at 512^3 that is seconds)."""
+    import itertools
+    import time
+
+    from volseg.morse import _basins, _measures
+
+    h = descending_complex(np.random.default_rng(1).random((10, 6, 5)))
+    calls, order = [], itertools.count()
+
+    def interrupted(*args):
+        first = next(order) == 0                # atomic: one thread gets 0
+        calls.append(1)
+        time.sleep(0.02)
+        if first:
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(_basins, "RECORD_CHUNK", 5)             # 60 chunks
+    monkeypatch.setattr(_basins, "_records_into", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        _basins.records(h.cells, h._field, h.saddle_value, None, _measures.unit_of,
+                        _measures.scale_of)
+    assert len(calls) < 20, len(calls)
+
+
 def test_segment_volume_blockwise_equal_for_every_field():
     rng = np.random.default_rng(4)
     x, y, z = np.meshgrid(*[np.arange(n) for n in (30, 26, 22)], indexing="ij")

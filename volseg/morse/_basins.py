@@ -176,7 +176,9 @@ def records(cells, field, saddle_value, weight, unit_of, scale_of) -> Basins:
                       unit, cell, rank, sums, at[k])
 
     # The kernel releases the GIL: chunks side by side on numba's threads (random
-    # reads of the saddles, bound by memory latency: 1.4-1.6x on 2 cores).
+    # reads of the saddles, bound by memory latency: 1.4-1.6x on 2 cores). An
+    # interrupt cancels the chunks not started (`Executor.map` does) rather than
+    # waiting for them.
     with ThreadPoolExecutor(max(1, min(numba.get_num_threads(), len(starts)))) as pool:
         list(pool.map(fill, range(len(starts))))
     return Basins(cell, rank, np.zeros(0, np.int64), sums, low, unit, scale_of(weight, 1.0))
