@@ -164,6 +164,29 @@ def test_an_interrupt_in_the_records_cancels_the_chunks_not_started(monkeypatch)
     assert len(calls) < 20, len(calls)
 
 
+def test_released_records_are_made_again_for_the_next_cut():
+    """`release_vertex_records` (the pipeline's, once its cut is made) lets the
+    watershed records go; cuts by either watershed measure afterwards equal a fresh
+    hierarchy's."""
+    from volseg.morse._hierarchy import _base_key
+
+    rng = np.random.default_rng(6)
+    f = rng.random((11, 9, 8))
+    h = descending_complex(f)
+    first = h.segment(n_regions=7, measure="volume")
+    assert _base_key("volume") in h._pruned
+    h.release_vertex_records()
+    assert _base_key("area") not in h._pruned
+    fresh = descending_complex(f)
+    np.testing.assert_array_equal(h.segment(n_regions=7, measure="volume"), first)
+    np.testing.assert_array_equal(h.segment(n_regions=5, measure="area"),
+                                  fresh.segment(n_regions=5, measure="area"))
+    result = segment_volume((f * 200).astype(np.uint8), field="gradient", n_regions=4,
+                            mask=None)
+    assert _base_key("volume") not in result.hierarchy._pruned
+    np.testing.assert_array_equal(result.recut(n_regions=4).labels, result.labels)
+
+
 def test_segment_volume_blockwise_equal_for_every_field():
     rng = np.random.default_rng(4)
     x, y, z = np.meshgrid(*[np.arange(n) for n in (30, 26, 22)], indexing="ij")

@@ -218,6 +218,13 @@ class MorseHierarchy(SizedByArrays):
             self._pruned[key] = (self._measure_cells or _measures.cell_measures)(self, measure)
         return self._pruned[key]
 
+    def release_vertex_records(self) -> None:
+        """Let go of the per-vertex records that a cut by a watershed measure (area,
+        volume) reads in memory (`_basins.records`: 16 bytes a vertex). The cuts made
+        are kept; a first cut by the other watershed measure makes them again."""
+        if isinstance(self.cells, np.ndarray):     # else given or summed blockwise: kept
+            self._pruned.pop(_base_key("area"), None)
+
     def _cell_values(self, measure) -> NDArray[np.float64]:
         base = self._cell_base(measure)
         return base.values if isinstance(base, _measures.Fixed) else base
