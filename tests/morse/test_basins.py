@@ -3,6 +3,9 @@ event's saliency against its definition (the superlevel-set components found by 
 breadth-first search), the cut's invariants, blockwise equal to in memory, and the
 masked gradient they are meant for."""
 
+import os
+import subprocess
+import sys
 import warnings
 from collections import deque
 
@@ -185,6 +188,31 @@ def test_released_records_are_made_again_for_the_next_cut():
                             mask=None)
     assert _base_key("volume") not in result.hierarchy._pruned
     np.testing.assert_array_equal(result.recut(n_regions=4).labels, result.labels)
+
+
+SWEEP_SIGNATURES = """
+import dask.array as da
+import numpy as np
+from volseg.morse import _basins, descending_complex
+f = np.random.default_rng(3).random((19, 13, 11))
+mask = f > 0.1
+a = descending_complex(f, mask=mask).extinction("volume")
+b = descending_complex(da.from_array(f, chunks=(7, 5, 6)),
+                       mask=da.from_array(mask, chunks=(7, 5, 6))).extinction("volume")
+assert np.array_equal(a, b)
+print(len(_basins._sweep.signatures), _basins._sweep.signatures)
+"""
+
+
+def test_the_sweep_compiles_once_for_in_memory_and_blockwise_records(tmp_path):
+    """In-memory records and the blocks' joined records give the sweep cells and ranks
+    of one type (`_basins._index`) and an order of one type: one compilation of
+    `_sweep` serves both (counted in a new process on an empty numba cache)."""
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba-cache")}
+    run = subprocess.run([sys.executable, "-c", SWEEP_SIGNATURES], capture_output=True,
+                         text=True, env=env)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.startswith("1 "), run.stdout
 
 
 def test_segment_volume_blockwise_equal_for_every_field():
