@@ -124,7 +124,8 @@ def test_every_field_is_a_registry_entry():
 def test_the_in_memory_gradient_in_slabs_is_the_whole_volumes(shape, rng, monkeypatch):
     """The numpy gradient, slab by slab with halos, equals `_gradient_block` of the whole
     volume at once, bit for bit, for every slab thickness (1 voxel up), with and without
-    a mask, normalised per slab or not; the result has room for the Morse padding."""
+    a mask, normalised per slab or not (as a Dask array's blocks are); the result has
+    room for the Morse padding."""
     from volseg import _buffers, fields
     from volseg._buffers import room_to_pad
 
@@ -133,15 +134,18 @@ def test_the_in_memory_gradient_in_slabs_is_the_whole_volumes(shape, rng, monkey
     span = (float(values.min()) - 2.5, float(values.max()))
     for mask in (None, rng.random(shape) > 0.3):
         whole = fields._gradient_block(values.astype(np.float64), mask, spacing=spacing)
-        normal = fields._gradient_block(fields.normalised(values, span), mask,
-                                        spacing=spacing)
+        low, high = span
+        normal = fields._gradient_block((values.astype(np.float64) - low) / (high - low),
+                                        mask, spacing=spacing)
+        lazy = gradient_magnitude(da.from_array(values, chunks=(3, 2, 2)), spacing,
+                                  mask, span)
+        assert np.asarray(lazy).tobytes() == normal.tobytes()
         for thick in range(1, shape[0] + 1):
             monkeypatch.setattr(_buffers, "MIN_SLAB", thick)
             got = gradient_magnitude(values, spacing, mask)
             assert got.tobytes() == whole.tobytes(), thick
             assert room_to_pad(got) is not None
-            low, high = span
-            got = fields._gradient_in_slabs(values, spacing, mask, (low, high - low))
+            got = gradient_magnitude(values, spacing, mask, span)
             assert got.tobytes() == normal.tobytes(), thick
 
 
@@ -158,8 +162,10 @@ def test_the_value_field_and_the_negated_gradient_have_room_to_pad(rng):
                          (rng.integers(0, 9, (5, 4, 3)).astype(np.uint16), (0, 8))):
         low, high = span
         signed = low < 0 < high
-        want = fields.normalised(np.abs(values) if signed else values,
-                                 (0.0, max(-low, high)) if signed else span)
+        v = np.abs(values.astype(np.float64)) if signed else values.astype(np.float64)
+        lo, hi = (0.0, max(-low, high)) if signed else span
+        want = (v - lo) / (hi - lo)
+        assert fields.normalised(v, (lo, hi)).tobytes() == want.tobytes()
         got = entry.make(values, span, None, None, None)
         assert got.tobytes() == want.tobytes() and room_to_pad(got) is not None
     ints = np.array([-128, -1, 0, 127], np.int8).reshape(4, 1, 1)

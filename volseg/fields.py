@@ -82,13 +82,22 @@ def _low_width(span) -> tuple[float, float]:
     return low, high - low if high > low else 1.0
 
 
-def _normalised_block(block, low, width):
-    return (block.astype(np.float64) - low) / width
+def _normalised_block(block, low, width, out=None):
+    """(block - low) / width in float64, into `out` if given (`block` itself, in
+    place, if it is `out`)."""
+    if out is None:
+        out = np.empty(np.shape(block))
+    if out is not block:
+        out[...] = block
+    out -= low
+    out /= width
+    return out
 
 
-def gradient_magnitude(values, spacing, mask=None):
-    """(X, Y, Z) |grad f| of `values` with the voxel `spacing`: central differences
-    inside, one-sided at the volume's border (as `numpy.gradient`). With a `mask`, a
+def gradient_magnitude(values, spacing, mask=None, span=None):
+    """(X, Y, Z) |grad f| of `values` with the voxel `spacing` (of the values
+    `normalised` over `span` first, if given): central differences inside,
+    one-sided at the volume's border (as `numpy.gradient`). With a `mask`, a
     difference never reaches outside it: one-sided at the mask's border, 0 for a voxel
     with no masked neighbour along an axis, so the mask's edge (a skull-stripped
     brain's rim, a CT's air) makes no basin walls of its own. A Dask array block by
@@ -96,6 +105,8 @@ def gradient_magnitude(values, spacing, mask=None):
     numpy array slab by slab so (a slab's temporaries, not the volume's)."""
     spacing = tuple(float(s) for s in spacing)
     if _validate.is_lazy(values):
+        if span is not None:
+            values = normalised(values, span)
         if mask is None:
             return values.map_overlap(_gradient_block, depth=1, boundary="none",
                                       dtype=np.float64, spacing=spacing)
@@ -105,7 +116,8 @@ def gradient_magnitude(values, spacing, mask=None):
         return da.map_overlap(_gradient_block, values, mask, depth=1, boundary="none",
                               dtype=np.float64, spacing=spacing)
     return _gradient_in_slabs(np.asarray(values), spacing,
-                              None if mask is None else np.asarray(mask, bool))
+                              None if mask is None else np.asarray(mask, bool),
+                              None if span is None else _low_width(span))
 
 
 def _gradient_in_slabs(values, spacing, mask, normalise=None):
@@ -164,10 +176,7 @@ def _curvature(values, span, request, scale, hooks, mask=None, owned=False):
 
 
 def _gradient(values, span, request, scale, hooks, mask=None, owned=False):
-    if _validate.is_lazy(values):
-        return gradient_magnitude(normalised(values, span), request.spacing, mask)
-    return _gradient_in_slabs(np.asarray(values), tuple(map(float, request.spacing)), mask,
-                              _low_width(span))
+    return gradient_magnitude(values, request.spacing, mask, span)
 
 
 def _value(values, span, request, scale, hooks, mask=None, owned=False):
@@ -183,10 +192,7 @@ def _value(values, span, request, scale, hooks, mask=None, owned=False):
     out[...] = values
     if signed:
         np.abs(out, out=out)
-    low, width = _low_width(span)
-    out -= low
-    out /= width
-    return out
+    return _normalised_block(out, *_low_width(span), out=out)
 
 
 FIELD_REGISTRY = Registry("field", [
