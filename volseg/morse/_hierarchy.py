@@ -223,7 +223,7 @@ class MorseHierarchy(SizedByArrays):
         volume) reads in memory (`_basins.records`: 16 bytes a vertex). The cuts made
         are kept; a first cut by the other watershed measure makes them again."""
         if isinstance(self.cells, np.ndarray):     # else given or summed blockwise: kept
-            self._pruned.pop(_base_key("area"), None)
+            self._pruned.pop(_WATERSHED_BASE, None)
 
     def _cell_values(self, measure) -> NDArray[np.float64]:
         base = self._cell_base(measure)
@@ -658,6 +658,12 @@ def region_table(region, masked: bool):
     return np.concatenate([region + 1, np.zeros(1, dtype=region.dtype)])
 
 
+#: The cache key of the records both watershed measures (area, volume) read.
+_WATERSHED_BASE = ("cells", "watershed")
+
+
 def _base_key(measure) -> tuple:
-    """The cache key of a measure's cell base: one for both watershed measures."""
-    return ("cells", "watershed" if get_measure(measure).watershed else get_measure(measure).name)
+    """The cache key of a measure's cell base: `_WATERSHED_BASE` for both watershed
+    measures."""
+    found = get_measure(measure)
+    return _WATERSHED_BASE if found.watershed else ("cells", found.name)
