@@ -106,33 +106,45 @@ def test_blockwise_equals_in_memory_on_uneven_chunks():
                                       np.asarray(lazy.segment(n_regions=9, measure=measure)))
 
 
-def test_in_memory_records_in_chunks_are_one_vertex_each(rng, monkeypatch):
-    """`records` on a grid, chunk by chunk (chunks of 1, 7 and 1000 vertices): one
-    record per vertex inside the mask, in flat order, with its cell, its rank (the
-    count of events with a saddle above it) and its fixed-point steps, cells and
-    ranks as int32 and counts implicit; the extinctions and cells' areas are those
-    of the whole field at once."""
+def test_in_memory_vertices_in_chunks_are_ordered_by_rank(rng, monkeypatch):
+    """`records` on a grid, ranked chunk by chunk (chunks of 1, 7 and 1000 vertices):
+    the vertices inside the mask ordered by rank (the count of events with a saddle
+    above them), increasing within a rank, as int32, read in the hierarchy's own cells
+    and field (not copies); the cells' areas and the fixed point's range are those of
+    the field inside the mask; the extinctions are those of the whole field at once
+    and of the sweep over one record per vertex (`Basins`, as the blocks give it)."""
     from volseg.morse import _basins, _measures
 
     f = np.round(rng.random((9, 8, 7)) * 40) / 8               # ties at saddles
     mask = rng.random(f.shape) > 0.2
     h = descending_complex(f, mask=mask)
     cells, field = h.cells.ravel(), h._field.ravel()
-    inside = cells >= 0
-    want_rank = np.array([np.sum(h.saddle_value > v) for v in field[inside]])
+    inside = np.flatnonzero(cells >= 0)
+    rank = np.array([np.sum(h.saddle_value > v) for v in field[inside]])
+    want_order = inside[np.argsort(rank, kind="stable")]
+    want_start = np.concatenate([[0], np.cumsum(np.bincount(rank, minlength=len(h.young) + 1))])
     low, high = field[inside].min(), field[inside].max()
-    unit = _measures.unit_of(low, high)
-    want_steps = np.floor((field[inside] - low) / unit).astype(np.int64)
+    steps = np.floor((field[inside] - low) / _measures.unit_of(low, high)).astype(np.int64)
+    one_each = _basins.Basins(cells[inside], rank.astype(np.int32),
+                              np.ones(len(rank), np.int64), steps, low,
+                              _measures.unit_of(low, high), 1.0)
     extinctions = None
     for chunk in (1, 7, 1000):
         monkeypatch.setattr(_basins, "RECORD_CHUNK", chunk)
         got = _basins.records(h.cells, h._field, h.saddle_value, None, _measures.unit_of,
                               _measures.scale_of)
-        assert got.cell.dtype == got.rank.dtype == np.int32 and len(got.count) == 0
-        np.testing.assert_array_equal(got.cell, cells[inside])
-        np.testing.assert_array_equal(got.rank, want_rank)
-        np.testing.assert_array_equal(got.sums, want_steps)
+        assert isinstance(got, _basins.RankedVertices) and got.order.dtype == np.int32
+        assert np.shares_memory(got.cells, h.cells) and np.shares_memory(got.field, h._field)
+        np.testing.assert_array_equal(got.order, want_order)
+        np.testing.assert_array_equal(got.start, want_start)
         np.testing.assert_array_equal(got.values, np.bincount(cells[inside]))
+        assert (got.low, got.unit) == (low, _measures.unit_of(low, high))
+        for volume in (False, True):
+            np.testing.assert_array_equal(
+                _basins.saliency(got, h.source, h.target, h.saddle_value, len(h.maxima),
+                                 volume),
+                _basins.saliency(one_each, h.source, h.target, h.saddle_value,
+                                 len(h.maxima), volume))
         fresh = descending_complex(f, mask=mask)
         now = [fresh.extinction(m) for m in ("area", "volume")]
         if extinctions is not None:
@@ -189,7 +201,7 @@ def test_an_interrupt_in_the_records_cancels_the_chunks_not_started(monkeypatch)
             raise KeyboardInterrupt
 
     monkeypatch.setattr(_basins, "RECORD_CHUNK", 5)             # 60 chunks
-    monkeypatch.setattr(_basins, "_records_into", interrupted)
+    monkeypatch.setattr(_basins, "_ranks_into", interrupted)
     with pytest.raises(KeyboardInterrupt):
         _basins.records(h.cells, h._field, h.saddle_value, None, _measures.unit_of,
                         _measures.scale_of)
@@ -229,19 +241,22 @@ a = descending_complex(f, mask=mask).extinction("volume")
 b = descending_complex(da.from_array(f, chunks=(7, 5, 6)),
                        mask=da.from_array(mask, chunks=(7, 5, 6))).extinction("volume")
 assert np.array_equal(a, b)
-print(len(_basins._sweep.signatures), _basins._sweep.signatures)
+kernels = (_basins._sweep, _basins._sweep_vertices, _basins._joined_at, _basins._rank)
+print(*(len(k.signatures) for k in kernels), [k.signatures for k in kernels])
 """
 
 
-def test_the_sweep_compiles_once_for_in_memory_and_blockwise_records(tmp_path):
-    """In-memory records and the blocks' joined records give the sweep cells and ranks
-    of one type (`_basins._index`) and an order of one type: one compilation of
-    `_sweep` serves both (counted in a new process on an empty numba cache)."""
+def test_the_sweeps_compile_once_and_share_their_join(tmp_path):
+    """The blocks' joined records give `_sweep` cells and ranks of one type
+    (`_basins._index`, as a mesh's records) and the in-memory grid's ranked vertices
+    go to `_sweep_vertices`: each compiles once, and the event join both call and the
+    rank both records paths take compile once for the two (counted in a new process
+    on an empty numba cache)."""
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba-cache")}
     run = subprocess.run([sys.executable, "-c", SWEEP_SIGNATURES], capture_output=True,
                          text=True, env=env)
     assert run.returncode == 0, run.stderr
-    assert run.stdout.startswith("1 "), run.stdout
+    assert run.stdout.startswith("1 1 1 1 "), run.stdout
 
 
 def test_segment_volume_blockwise_equal_for_every_field():

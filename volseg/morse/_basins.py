@@ -11,9 +11,10 @@ the sum of f(v) - s over them. A vertex joins at the first event whose saddle is
 below it, its *rank* (the count of events with a higher saddle). `records` sums the
 vertices per (cell, rank), block by block, in fixed point on a grid (`STEPS` per range
 of the field, `volseg.morse._measures`), so the blocks' sums add up to the in-memory
-ones bit for bit (in memory, one record per vertex); `saliency` then sweeps the events
-once, adding each rank's records (a counting sort) to its region and reading both sides
-before joining them.
+ones bit for bit; in memory on a grid `ranked` orders the vertices by rank instead and
+the sweep reads their cells and values where they are. `saliency` then sweeps the
+events once, adding each rank's records (or vertices) to its region and reading both
+sides before joining them.
 
 A cut by saliency keeps the k - 1 events of largest saliency and merges the rest
 across their saddle edges (source, target): the regions are connected, and a larger
@@ -28,22 +29,23 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from .._distinct import counts, index_type, slot_of
+from .._distinct import index_type, slot_of
 from .._sizes import SizedByArrays
 from .._union_find import find_root
 from ._kernels import counting_sort
 from ._prune import masked_range
 
-__all__ = ["Basins", "records", "block_records", "joined", "saliency", "merge_order"]
+__all__ = ["Basins", "RankedVertices", "BASINS", "records", "block_records", "joined",
+           "saliency", "merge_order"]
 
 
 @dataclass(frozen=True)
 class Basins(SizedByArrays):
-    """The vertices of a field summed per (cell, rank): `cell`, `rank` (R,) of one
-    integer type (`_index`), `count` (R,) (vertices, or their weights on a mesh; empty
-    when every record is one vertex, as in memory on a grid), `sums` (R,) of the
-    vertices' values in fixed point (`low` + `unit` x steps; on a mesh, weight x value
-    as floats), `scale` what one step of area x `unit` counts (the vertex weight)."""
+    """The vertices of a field summed per (cell, rank), as the blocks give them (one
+    record per vertex on a mesh): `cell`, `rank` (R,) of one integer type (`_index`),
+    `count` (R,) (vertices, or their weights on a mesh), `sums` (R,) of the vertices'
+    values in fixed point (`low` + `unit` x steps; on a mesh, weight x value as
+    floats), `scale` what one step of area x `unit` counts (the vertex weight)."""
 
     cell: np.ndarray
     rank: np.ndarray
@@ -57,9 +59,32 @@ class Basins(SizedByArrays):
     def values(self) -> np.ndarray:
         """(M,) each cell's area, as `MorseHierarchy.cell_measure` reports it."""
         n = int(self.cell.max(initial=-1)) + 1
-        if len(self.count) == 0:                        # one vertex per record
-            return counts(self.cell, n) * self.scale
         return np.bincount(self.cell, weights=self.count, minlength=n) * self.scale
+
+
+@dataclass(frozen=True)
+class RankedVertices(SizedByArrays):
+    """The vertices of a field in memory on a grid, in the order the sweep adds them:
+    `order` (V,) the flat indices of the vertices inside the mask by rank, rank r's
+    being order[start[r]:start[r + 1]] (`start` (E + 2,)); the sweep reads their
+    cells and values in `cells` and `field` (flat views of the hierarchy's own, not
+    copies), the values' steps in fixed point (`low` + `unit` x steps) as `Basins`'
+    are. 4 bytes a vertex (a `Basins` record took 16, and its sweep 4 more).
+    `areas` (M,): each cell's vertex count; `scale`: what one counts."""
+
+    cells: np.ndarray
+    field: np.ndarray
+    order: np.ndarray
+    start: np.ndarray
+    areas: np.ndarray
+    low: float
+    unit: float
+    scale: float
+
+    @property
+    def values(self) -> np.ndarray:
+        """(M,) each cell's area, as `MorseHierarchy.cell_measure` reports it."""
+        return self.areas * self.scale
 
 
 def _index(cell_max: int, n_events: int):
@@ -151,109 +176,158 @@ def joined(parts, n_events: int, low: float, unit: float, scale: float) -> Basin
 RECORD_CHUNK = 1 << 22
 
 
-def records(cells, field, saddle_value, weight, unit_of, scale_of) -> Basins:
-    """`Basins` of a field in memory: one record per vertex (no table: the sweep's
-    counting sort by rank is the grouping), fixed point on a grid (`weight` None or a
-    number; the step ``unit_of(low, high)``, an area step ``scale_of(weight, 1)``),
-    float sums weighted per vertex on a mesh (`weight` one per vertex).
+def records(cells, field, saddle_value, weight, unit_of, scale_of):
+    """What the sweep of a field in memory reads: on a grid (`weight` None or a
+    number) its `RankedVertices`, the step ``unit_of(low, high)`` and an area step
+    ``scale_of(weight, 1)``; on a mesh (`weight` one per vertex) `Basins` of one
+    record per vertex inside the mask, with float sums weighted per vertex.
 
-    On a grid a record is its cell and rank (`_index`: int32 where they fit) and its
-    int64 steps, 16 bytes a vertex, filled chunk by chunk (`RECORD_CHUNK`) with no
-    temporaries (at 512^3 the records and their temporaries took 40 bytes a voxel or
-    more)."""
+    The ranks are taken chunk by chunk (`RECORD_CHUNK`) on threads into one array of
+    the cells' integer type (4 bytes a voxel, let go once the vertices are ordered).
+    At 512^3 the records of one per vertex took 16 bytes a voxel, and the sweep's
+    order 4 more."""
     cells, field = np.ravel(cells), np.ravel(field)
     index = _index(int(cells.max(initial=0)), len(saddle_value))
-    negated = -np.asarray(saddle_value, np.float64)
+    rank = _ranks(cells, field, -np.asarray(saddle_value, np.float64), index)
     if weight is not None and np.ndim(weight) > 0:
-        cell, rank, _ = _filled(cells, field, negated, 0.0, np.inf, index)
         inside = cells >= 0
         w = np.asarray(weight, np.float64)[inside]
-        return Basins(cell, rank, w, w * field[inside], 0.0, 1.0, 1.0)
+        return Basins(cells[inside].astype(index), rank[inside], w, w * field[inside],
+                      0.0, 1.0, 1.0)
     low, high = masked_range(cells, field)
-    unit = unit_of(low, high)
-    cell, rank, sums = _filled(cells, field, negated, low, unit, index)
-    return Basins(cell, rank, np.zeros(0, np.int64), sums, low, unit, scale_of(weight, 1.0))
+    n_cells = int(cells.max(initial=-1)) + 1
+    order = np.empty(int(np.count_nonzero(rank >= 0)), index_type(len(cells)))
+    start, areas = _by_rank(rank, cells, len(saddle_value) + 1, n_cells, order)
+    del rank
+    return RankedVertices(cells, field, order, start, areas, low, unit_of(low, high),
+                          scale_of(weight, 1.0))
 
 
-def _filled(cells, field, negated, low, unit, index):
-    """(cell, rank, steps) of the vertices inside the mask, `_records_into` chunk by
-    chunk (`RECORD_CHUNK`) into arrays made once."""
+def _ranks(cells, field, negated, index):
+    """(N,) each vertex's rank (`_rank`), -1 outside the mask, `_ranks_into` chunk by
+    chunk (`RECORD_CHUNK`)."""
+    rank = np.empty(len(cells), index)
     starts = range(0, len(cells), RECORD_CHUNK)
-    taken = [int(np.count_nonzero(cells[a:a + RECORD_CHUNK] >= 0)) for a in starts]
-    at = np.concatenate([[0], np.cumsum(taken, dtype=np.int64)])
-    cell, rank, sums = (np.empty(at[-1], index), np.empty(at[-1], index),
-                        np.empty(at[-1], np.int64))
 
-    def fill(k):
-        a = starts[k]
-        _records_into(cells[a:a + RECORD_CHUNK], field[a:a + RECORD_CHUNK], negated, low,
-                      unit, cell, rank, sums, at[k])
+    def fill(a):
+        b = a + RECORD_CHUNK
+        _ranks_into(cells[a:b], field[a:b], negated, rank[a:b])
 
     # The kernel releases the GIL: chunks side by side on numba's threads (random
     # reads of the saddles, bound by memory latency: 1.4-1.6x on 2 cores). An
     # interrupt cancels the chunks not started (`Executor.map` does) rather than
     # waiting for them.
     with ThreadPoolExecutor(max(1, min(numba.get_num_threads(), len(starts)))) as pool:
-        list(pool.map(fill, range(len(starts))))
-    return cell, rank, sums
+        list(pool.map(fill, starts))
+    return rank
 
 
 @numba.njit(cache=True, nogil=True)
-def _records_into(cells, field, negated, low, unit, cell, rank, sums, at):
-    """The records of a chunk's vertices inside the mask (cell >= 0), from index `at`:
-    the cell, the rank (`_rank`) and the fixed-point steps (all 0 for `unit` inf:
-    the ranks alone)."""
+def _ranks_into(cells, field, negated, rank):
+    """rank[i]: the rank of vertex i (`_rank`), -1 outside the mask (cell < 0)."""
     for i in range(len(cells)):
-        if cells[i] < 0:
-            continue
-        f = field[i]
-        cell[at] = cells[i]
-        rank[at] = _rank(negated, f)
-        sums[at] = np.int64(np.floor((f - low) / unit))
-        at += 1
+        rank[i] = _rank(negated, field[i]) if cells[i] >= 0 else -1
 
 
-def saliency(basins: Basins, source, target, saddle_value, n_max: int,
-             volume: bool) -> np.ndarray:
+@numba.njit(cache=True, nogil=True)
+def _by_rank(rank, cells, n_ranks, n_cells, order):
+    """A counting sort of the vertices inside the mask (rank >= 0) by rank into
+    `order` (increasing index within a rank); returns each rank's start (n_ranks + 1,)
+    and each cell's vertex count (n_cells,)."""
+    start = np.zeros(n_ranks + 1, dtype=np.int64)
+    areas = np.zeros(n_cells, dtype=np.int64)
+    for i in range(len(rank)):
+        if rank[i] >= 0:
+            start[rank[i] + 1] += 1
+            areas[cells[i]] += 1
+    for r in range(n_ranks):
+        start[r + 1] += start[r]
+    fill = start[:-1].copy()
+    for i in range(len(rank)):
+        if rank[i] >= 0:
+            order[fill[rank[i]]] = i
+            fill[rank[i]] += 1
+    return start, areas
+
+
+def saliency(basins, source, target, saddle_value, n_max: int, volume: bool) -> np.ndarray:
     """(E,) each event's saliency: the smaller area (or volume) of the two regions it
-    joins, at its saddle; int64 steps on a grid (times `basins.scale`, and `unit` for
-    a volume, to read it), float on a mesh."""
+    joins, at its saddle, from `Basins` or `RankedVertices`; int64 steps on a grid
+    (times `scale`, and `unit` for a volume, to read it), float on a mesh."""
     saddle_value = np.asarray(saddle_value, np.float64)
+    source, target = np.asarray(source, np.int64), np.asarray(target, np.int64)
+    if isinstance(basins, RankedVertices):
+        out = np.empty(len(source), dtype=np.int64)
+        _sweep_vertices(basins.cells, basins.field, basins.order, basins.start, basins.low,
+                        basins.unit, source, target, _levels(basins, saddle_value), n_max,
+                        volume, out)
+        return out
     if basins.sums.dtype == np.int64:
-        level = np.floor((saddle_value - basins.low) / basins.unit).astype(np.int64)
+        level = _levels(basins, saddle_value)
     else:
         level = saddle_value
     out = np.empty(len(source), dtype=basins.sums.dtype)
     order = np.empty(len(basins.rank), dtype=index_type(len(basins.rank)))
-    _sweep(basins.cell, basins.rank, basins.count, basins.sums,
-           np.asarray(source, np.int64), np.asarray(target, np.int64), level, n_max,
+    _sweep(basins.cell, basins.rank, basins.count, basins.sums, source, target, level, n_max,
            volume, order, out)
     return out
 
 
+def _levels(basins, saddle_value):
+    """The saddles' values in the steps of the fixed point."""
+    return np.floor((saddle_value - basins.low) / basins.unit).astype(np.int64)
+
+
 @numba.njit(cache=True, nogil=True)
 def _sweep(cell, rank, count, sums, source, target, level, n_max, volume, order, out):
-    """`saliency`'s sweep; `count` empty: one vertex per record."""
+    """`saliency`'s sweep of `Basins`."""
     parent = np.arange(n_max)
     area = np.zeros(n_max, dtype=count.dtype)
     total = np.zeros(n_max, dtype=sums.dtype)
-    ones = len(count) == 0
     start = counting_sort(rank, len(source) + 1, order)
     for e in range(len(source)):
         for t in range(start[e], start[e + 1]):
             i = order[t]
             r = find_root(parent, cell[i])
-            area[r] += 1 if ones else count[i]
+            area[r] += count[i]
             total[r] += sums[i]
-        a, b = find_root(parent, source[e]), find_root(parent, target[e])
-        if volume:
-            left, right = total[a] - level[e] * area[a], total[b] - level[e] * area[b]
-        else:
-            left, right = area[a], area[b]
-        out[e] = min(left, right)
-        parent[a] = b
-        area[b] += area[a]
-        total[b] += total[a]
+        _joined_at(e, parent, area, total, source, target, level, volume, out)
+
+
+@numba.njit(cache=True, nogil=True)
+def _sweep_vertices(cells, field, order, start, low, unit, source, target, level, n_max,
+                    volume, out):
+    """`saliency`'s sweep of `RankedVertices`: each vertex's cell and fixed-point
+    steps read where they are, the steps as `records` computes them."""
+    parent = np.arange(n_max)
+    area = np.zeros(n_max, dtype=np.int64)
+    total = np.zeros(n_max, dtype=np.int64)
+    for e in range(len(source)):
+        for t in range(start[e], start[e + 1]):
+            v = order[t]
+            r = find_root(parent, cells[v])
+            area[r] += 1
+            total[r] += np.int64(np.floor((field[v] - low) / unit))
+        _joined_at(e, parent, area, total, source, target, level, volume, out)
+
+
+@numba.njit(cache=True, nogil=True)
+def _joined_at(e, parent, area, total, source, target, level, volume, out):
+    """Event e of a sweep: its saliency, the smaller side's area (or volume, above
+    its saddle) into out[e], then the two regions joined."""
+    a, b = find_root(parent, source[e]), find_root(parent, target[e])
+    if volume:
+        left, right = total[a] - level[e] * area[a], total[b] - level[e] * area[b]
+    else:
+        left, right = area[a], area[b]
+    out[e] = min(left, right)
+    parent[a] = b
+    area[b] += area[a]
+    total[b] += total[a]
+
+
+#: What `saliency` sweeps: the watershed measures' cell base.
+BASINS = (Basins, RankedVertices)
 
 
 def merge_order(saliency_of_events) -> np.ndarray:

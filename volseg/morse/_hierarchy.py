@@ -14,7 +14,7 @@ from numpy.typing import NDArray
 from .._sizes import SizedByArrays
 from ..errors import VolsegWarning
 from . import _basins, _kernels, _measures, _prune, _prune_groups
-from ._basins import Basins
+from ._basins import BASINS
 from ._graph import grid_offsets
 from ._measures import SIZE, get_measure
 
@@ -210,9 +210,9 @@ class MorseHierarchy(SizedByArrays):
     def _cell_base(self, measure):
         """`cell_measure` before any pruning, computed once (a blockwise cut on the
         workers is given it: `with_cell_measures`): `_measures.Fixed`, or float sums
-        with a mesh's vertex weights, or the `_basins.Basins` both watershed measures
-        read (computed once for the two: a cut by volume that falls back to area reads
-        the same records)."""
+        with a mesh's vertex weights, or what both watershed measures read (`_basins.
+        BASINS`, computed once for the two: a cut by volume that falls back to area
+        reads the same records)."""
         key = _base_key(measure)
         if key not in self._pruned:
             self._pruned[key] = (self._measure_cells or _measures.cell_measures)(self, measure)
@@ -220,7 +220,7 @@ class MorseHierarchy(SizedByArrays):
 
     def release_vertex_records(self) -> None:
         """Let go of the per-vertex records that a cut by a watershed measure (area,
-        volume) reads in memory (`_basins.records`: 16 bytes a vertex). The cuts made
+        volume) reads in memory (`_basins.records`: 4 bytes a vertex). The cuts made
         are kept; a first cut by the other watershed measure makes them again."""
         if isinstance(self.cells, np.ndarray):     # else given or summed blockwise: kept
             self._pruned.pop(_WATERSHED_BASE, None)
@@ -233,7 +233,7 @@ class MorseHierarchy(SizedByArrays):
         """The same hierarchy given each cell's measures ({measure: what
         `_measures.cell_measures` gives}), so that its cuts read no cell."""
         out = dataclasses.replace(self, _pruned={})
-        out._pruned.update({_base_key(m): v if isinstance(v, _measures.Fixed | Basins)
+        out._pruned.update({_base_key(m): v if isinstance(v, (_measures.Fixed, *BASINS))
                             else np.asarray(v, np.float64) for m, v in measures.items()})
         return out
 
@@ -243,7 +243,7 @@ class MorseHierarchy(SizedByArrays):
         small heaps stay in cache), else sequentially."""
         if measure not in self._pruned:
             base = self._cell_base(measure)
-            if isinstance(base, Basins):
+            if isinstance(base, BASINS):
                 self._pruned[measure] = self._watershed(measure, base)
                 return self._pruned[measure]
             fixed = isinstance(base, _measures.Fixed)
