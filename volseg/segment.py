@@ -528,7 +528,7 @@ def _morse_and_cut(field, cut: CutRequest, timings, *, mask=None, adjacency=None
         labels, report = cut_of(hierarchy, cut)
         if cut.fallback is not None:
             labels, report = _unless_degenerate(hierarchy, cut, labels, report)
-        if isinstance(hierarchy, MorseHierarchy):       # the cut's done: 16 B a voxel
+        if isinstance(hierarchy, MorseHierarchy):       # the cut is done: 4 B a voxel
             hierarchy.release_vertex_records()
     with _timed(timings, "labels", storage):
         labels = storage.labels(labels, report.n_regions)
