@@ -213,3 +213,21 @@ def test_the_pipelines_gradient_comes_back_bit_for_bit_after_its_negation(rng):
     assert result.curvature.tobytes() == want.tobytes()
     assert not np.signbit(result.curvature).any()
     assert result.hierarchy._field.tobytes() == (-want).tobytes()
+
+
+@pytest.mark.parametrize("field", ["gradient", "curvature"])
+def test_stages_without_the_hierarchy_give_the_same_field_and_labels(field, rng):
+    """`run_stages(keep_hierarchy=False)` (the files' run in memory) returns no
+    hierarchy, and the same field bit for bit (the gradient negated back in the Morse
+    stage's own buffer, +0.0 for its zeros) and the same labels as with it."""
+    from volseg.segment import SegmentRequest, run_stages
+
+    volume = _phantom(rng)
+    volume[:4] = 90                                       # flat: zero gradient
+    request = SegmentRequest.checked(field=field, mask=None, n_regions=3, dtype=volume.dtype)
+    kept, _ = run_stages(volume.copy(), request)
+    alone, _ = run_stages(volume.copy(), request, keep_hierarchy=False)
+    assert kept.hierarchy is not None and alone.hierarchy is None
+    assert alone.curvature.tobytes() == kept.curvature.tobytes()
+    assert not np.signbit(alone.curvature).any() or field == "curvature"
+    np.testing.assert_array_equal(alone.labels, kept.labels)

@@ -335,8 +335,10 @@ def segment_to_files(volume, outputs, *, operator="weighted", n_regions=None,
             # Dask's scheduler loop, which is interruptible already).
             stages = _stages_saying_warnings if lazy else partial(responsive,
                                                                   _stages_saying_warnings)
+            # In memory the files need the cut alone (`keep_hierarchy`); a blockwise
+            # run's hierarchy describes its work folder.
             result, value_range = stages(data, request, storage, name, say,
-                                         str(volume.path or name))
+                                         str(volume.path or name), lazy)
         except ValueError:     # the input refused: no work worth resuming
             if lazy:
                 shutil.rmtree(storage.work_folder, ignore_errors=True)
@@ -444,13 +446,14 @@ def _write_result(paths, volume, result, data, value_range, outputs, *, checksum
     return info
 
 
-def _stages_saying_warnings(data, request, storage, name, say, source):
+def _stages_saying_warnings(data, request, storage, name, say, source, keep_hierarchy):
     """`run_stages`, its warnings (fewer maxima than asked, ...) given again as
     `VolsegWarning`s naming the input (the command line prints each as one line, even
     with -q)."""
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", UserWarning)
-        out = run_stages(data, request, storage, source=source)
+        out = run_stages(data, request, storage, source=source,
+                         keep_hierarchy=keep_hierarchy)
     for warning in caught:
         if issubclass(warning.category, UserWarning):
             warnings.warn(f"{name}: {warning.message}", VolsegWarning, stacklevel=2)

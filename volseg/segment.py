@@ -424,7 +424,8 @@ class InMemory(Storage):
 
 
 def run_stages(data, request: SegmentRequest, storage: Storage | None = None, *,
-               source: str = "the volume") -> tuple[Segmentation, tuple]:
+               source: str = "the volume",
+               keep_hierarchy: bool = True) -> tuple[Segmentation, tuple]:
     """The stages of a volume: mask, smoothing, value scale, curvature, Morse, cut.
 
     Parameters
@@ -436,6 +437,11 @@ def run_stages(data, request: SegmentRequest, storage: Storage | None = None, *,
         Default `InMemory`.
     source : str
         What messages call the data (the file's path).
+    keep_hierarchy : bool
+        False: the result's `hierarchy` is None, for a caller that needs the cut
+        alone (the files); a field the Morse stage read negated (the gradient) then
+        comes back in place, in the Morse stage's buffer, not beside it (8 bytes a
+        voxel off the peak).
 
     Returns
     -------
@@ -491,7 +497,10 @@ def run_stages(data, request: SegmentRequest, storage: Storage | None = None, *,
     hierarchy, labels, report = _morse_and_cut(
         morse_field, request.cut, timings, mask=choice.mask, storage=storage,
         vertex_weight=float(np.prod(request.spacing)), own_field=entry.name != GIVEN)
-    field = np.negative(morse_field) if negated else field
+    if not keep_hierarchy:
+        hierarchy = None                    # it read `morse_field`, negated next
+    if negated:
+        field = np.negative(morse_field, out=None if keep_hierarchy else morse_field)
     del morse_field
     result = Segmentation(labels, field, hierarchy, operator=request.operator.name,
                           value_scale=scale, spacing=request.spacing, timings=timings,
