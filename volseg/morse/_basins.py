@@ -11,10 +11,10 @@ the sum of f(v) - s over them. A vertex joins at the first event whose saddle is
 below it, its *rank* (the count of events with a higher saddle). `records` sums the
 vertices per (cell, rank), block by block, in fixed point on a grid (`STEPS` per range
 of the field, `volseg.morse._measures`), so the blocks' sums add up to the in-memory
-ones bit for bit; in memory on a grid `ranked` orders the vertices by rank instead and
-the sweep reads their cells and values where they are. `saliency` then sweeps the
-events once, adding each rank's records (or vertices) to its region and reading both
-sides before joining them.
+ones bit for bit; in memory on a grid `records` orders the vertices by rank instead
+(`RankedVertices`) and the sweep reads their cells and values where they are.
+`saliency` then sweeps the events once, adding each rank's records (or vertices) to
+its region and reading both sides before joining them.
 
 A cut by saliency keeps the k - 1 events of largest saliency and merges the rest
 across their saddle edges (source, target): the regions are connected, and a larger
@@ -88,8 +88,8 @@ class RankedVertices(SizedByArrays):
 
 
 def _index(cell_max: int, n_events: int):
-    """The type of a `Basins`' cells and ranks: int32 where they fit (half the memory
-    of one record per vertex), else int64; the same rule in memory and blockwise, so
+    """The type of a `Basins`' cells and ranks (and of the ranks `records` takes in
+    memory): int32 where they fit, else int64; the same rule for blocks and meshes, so
     `_sweep` compiles once."""
     return index_type(max(cell_max, n_events) + 1)
 
@@ -108,6 +108,13 @@ def _rank(negated, value):
         base = base + half if negated[base + half] < q else base
         m -= half
     return base + 1 if n > 0 and negated[base] < q else base
+
+
+@numba.njit(cache=True, nogil=True)
+def _steps(value, low, unit):
+    """A value in the fixed point's steps: floor((value - low) / unit), as int64 (the
+    saddles' levels are `_levels`, the same arithmetic in numpy)."""
+    return np.int64(np.floor((value - low) / unit))
 
 
 @numba.njit(cache=True, nogil=True)
@@ -147,7 +154,7 @@ def block_records(cells, field, negated_saddles, low, unit):
             keys[slot] = key
             used += 1
         counts[slot] += 1
-        sums[slot] += np.int64(np.floor((field[i] - low) / unit))
+        sums[slot] += _steps(field[i], low, unit)
     taken = keys >= 0
     return keys[taken], counts[taken], sums[taken]
 
@@ -297,8 +304,8 @@ def _sweep(cell, rank, count, sums, source, target, level, n_max, volume, order,
 @numba.njit(cache=True, nogil=True)
 def _sweep_vertices(cells, field, order, start, low, unit, source, target, level, n_max,
                     volume, out):
-    """`saliency`'s sweep of `RankedVertices`: each vertex's cell and fixed-point
-    steps read where they are, the steps as `records` computes them."""
+    """`saliency`'s sweep of `RankedVertices`: each vertex's cell and value read
+    where they are, the value in steps (`_steps`) as a block's records sum them."""
     parent = np.arange(n_max)
     area = np.zeros(n_max, dtype=np.int64)
     total = np.zeros(n_max, dtype=np.int64)
@@ -307,7 +314,7 @@ def _sweep_vertices(cells, field, order, start, low, unit, source, target, level
             v = order[t]
             r = find_root(parent, cells[v])
             area[r] += 1
-            total[r] += np.int64(np.floor((field[v] - low) / unit))
+            total[r] += _steps(field[v], low, unit)
         _joined_at(e, parent, area, total, source, target, level, volume, out)
 
 

@@ -210,9 +210,9 @@ class MorseHierarchy(SizedByArrays):
     def _cell_base(self, measure):
         """`cell_measure` before any pruning, computed once (a blockwise cut on the
         workers is given it: `with_cell_measures`): `_measures.Fixed`, or float sums
-        with a mesh's vertex weights, or what both watershed measures read (`_basins.
-        BASINS`, computed once for the two: a cut by volume that falls back to area
-        reads the same records)."""
+        with a mesh's vertex weights, or what both watershed measures read (one of
+        `_basins.BASINS`, computed once for the two: a cut by volume that falls back
+        to area reads the same records)."""
         key = _base_key(measure)
         if key not in self._pruned:
             self._pruned[key] = (self._measure_cells or _measures.cell_measures)(self, measure)
