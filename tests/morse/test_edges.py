@@ -82,3 +82,58 @@ def test_grouping_read_off_the_cells_is_the_grouping_by_the_vertex_list(seed, n_
     _kernels.group_by_cell_of_nodes(cell, n_cells, *got)
     for one, other in zip(expected, got, strict=True):
         np.testing.assert_array_equal(one, other)
+
+
+def _pairs_by_definition(graph, cell):
+    """{(a, b): saddle} of every pair of cells a < b joined by an edge, the saddle the
+    highest lower end of their edges (by value, then index), walking every neighbour
+    of every vertex: the definition `_cross_edges` must meet."""
+    best = {}
+    for v in graph.vertices:
+        ends = (v + graph.offsets if graph.grid
+                else graph.indices[graph.indptr[v]:graph.indptr[v + 1]])
+        for u in ends:
+            a, b = cell[v], cell[u]
+            if b < 0 or a == b:
+                continue
+            low = min((graph.values[v], v), (graph.values[u], u))
+            key = (min(a, b), max(a, b))
+            best[key] = max(best.get(key, low), low)
+    return {key: int(saddle) for key, (_, saddle) in best.items()}
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(0, 2**31), st.integers(1, 30), st.sampled_from(["kuhn", 6, 26, "graph"]),
+       st.sampled_from([1 << 20, 7, 1]))
+def test_cross_edges_are_one_per_pair_with_its_highest_saddle(seed, n_cells, kind, chunk):
+    """`_cross_edges` walks each edge once, from its lower-index end, and merges the
+    pairs found from both sides: exactly the pairs of cells joined by an edge, a < b,
+    each with the highest lower end of its edges, as walking every neighbour finds
+    them; with ties in the values, a mask, cells in any layout, and chunks of one
+    vertex up (so the chunks overflow and are rerun)."""
+    from volseg.morse import _edges
+    from volseg.morse._graph import _neighbourhood
+
+    rng = np.random.default_rng(seed)
+    shape = tuple(rng.integers(2, 7, 3))
+    values = np.round(rng.random(shape) * 4) / 4                  # ties
+    mask = rng.random(shape) > 0.2
+    adjacency = None
+    if kind == "graph":
+        n = values.size
+        adjacency = rng.integers(0, n, (3 * n, 2))
+    graph = _neighbourhood(values.ravel() if adjacency is not None else values,
+                           mask.ravel() if adjacency is not None else mask, adjacency,
+                           "kuhn" if kind == "graph" else kind)
+    cell = np.full(len(graph.values), -1, dtype=np.int32)
+    cell[graph.vertices] = rng.integers(0, n_cells, len(graph.vertices))
+    want = _pairs_by_definition(graph, cell)
+    old, _edges._CHUNK_VERTICES = _edges._CHUNK_VERTICES, chunk
+    try:
+        a, b, saddle = _edges._cross_edges(graph, cell, n_cells)
+    finally:
+        _edges._CHUNK_VERTICES = old
+    assert (a < b).all()
+    assert dict(zip(zip(a.tolist(), b.tolist(), strict=True), saddle.tolist(),
+                    strict=True)) == want
+    assert len(a) == len(want)

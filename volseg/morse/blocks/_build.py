@@ -138,14 +138,17 @@ def _pairs_of_block(halo_values, halo_cells, origin, shape, offsets):
 
     The in-memory cross-edge pass (`_edges._cross_edges`) runs on the block with its
     halo as the padded field: the owned voxels in the mask are its vertices, the halo
-    holds the neighbours' values (-inf outside the volume and the mask). An edge is
-    seen from its smaller cell's voxel, so each edge between two blocks is found by
-    one of them. Cells are renumbered in increasing order (the pairs and ties keep the
-    in-memory order) and `spanning_forest` keeps the block's forest of the highest
-    saddles per pair, in the in-memory order."""
+    holds the neighbours' values (-inf outside the volume and the mask, where the
+    cell is -1: no cell, not a partner). An edge is walked from its lower-index end,
+    so each edge between two blocks is found by the block that owns that end. Cells
+    are renumbered in increasing order (the pairs and ties keep the in-memory order)
+    and `spanning_forest` keeps the block's forest of the highest saddles per pair,
+    in the in-memory order."""
     faces = _faces(halo_cells, origin, shape)
     values = np.ascontiguousarray(halo_values, dtype=np.float64)
     cells, local = places(halo_cells)
+    if len(cells) and cells[0] < 0:     # no cell (outside the volume or the mask): -1
+        cells, local = cells[1:], local - 1
     strides = np.array([s // values.itemsize for s in values.strides], dtype=np.int64)
     owned = np.arange(values.size).reshape(values.shape)[1:-1, 1:-1, 1:-1].ravel()
     owned = owned[values.ravel()[owned] > -np.inf]         # the block's voxels in the mask
