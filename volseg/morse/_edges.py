@@ -20,18 +20,15 @@ def _cross_edges(graph, cell, n_cells, *, cells_mark_vertices=False):
     memory; a block's halo nodes have cells too), so the grouping reads `cell` alone
     and the vertex list is freed before it (4 bytes a voxel off the build's peak).
 
-    The vertices are grouped by cell (a counting sort), then each cell's forward
-    edges (each edge once, from its lower-index end) are reduced to one per partner
-    cell, and the pairs found from both sides merged (`_kernels.two_sided`): exactly
-    one edge per pair, which is all the elder-rule union-find needs (a lower edge of a
-    pair can never join two components). Walking every neighbour and keeping the
-    larger partners read each edge twice: the pass took 1.5x as long. Cells are
-    walked in the order of their first vertex (so the walk moves through memory), in
-    chunks of about `_CHUNK_VERTICES` vertices run in parallel; each chunk gets room
-    for 20 entries per cell plus one per 8 vertices (a quantized curvature field has
-    about 16, both sides counted), and the chunks that overflow are rerun with exact
-    room. The grouping is freed before the pieces are joined, so the peak stays near
-    the field's own arrays (about 24 bytes per voxel in all at 256^3).
+    The vertices are grouped by cell (a counting sort), then each cell's edges to
+    cells with a larger id are reduced to one per partner: exactly one edge per pair,
+    which is all the elder-rule union-find needs (a lower edge of a pair can never
+    join two components). Cells are walked in the order of their first vertex (so
+    the walk moves through memory), in chunks of about `_CHUNK_VERTICES` vertices run
+    in parallel; each chunk gets room for 10 pairs per cell plus one per 16 vertices
+    (quantized fields need about 8 per cell), and the chunks that overflow are rerun
+    with exact room. The grouping is freed before the pieces are joined, so the peak
+    stays near the field's own arrays (about 24 bytes per voxel in all at 256^3).
     """
     flat, grid, offsets, indptr, indices = (graph.values, graph.grid, graph.offsets,
                                             graph.indptr, graph.indices)
@@ -59,9 +56,7 @@ def _cross_edges(graph, cell, n_cells, *, cells_mark_vertices=False):
     cells_in = np.diff(bounds)
     vertices_in = np.add.reduceat(counts_in_order, np.minimum(bounds[:-1], n_cells - 1))
     vertices_in[cells_in == 0] = 0
-    capacity = 20 * cells_in + vertices_in // 8 + 1024
-    if grid:                    # forward edges only: the other half walked from there
-        offsets = np.ascontiguousarray(offsets[offsets > 0])
+    capacity = 10 * cells_in + vertices_in // 16 + 1024
     degree = len(offsets) if grid else int(np.diff(indptr).max(initial=0))
     # Partner table per chunk: twice the largest partner bound of its cells, a power of 2.
     sizes = np.minimum(degree * counts_in_order, n_cells)
@@ -82,12 +77,7 @@ def _cross_edges(graph, cell, n_cells, *, cells_mark_vertices=False):
         else:
             k = int(np.searchsorted(over, c))
             pieces.append([arr[room_starts[k]:room_starts[k] + counts[c]] for arr in room])
-    a, b, v = (np.concatenate([p[k] for p in pieces]) for k in range(3))
-    del pieces, out
-    if len(over):
-        del room
-    keep = _kernels.two_sided(a, b, v, flat, n_cells)
-    return a[keep], b[keep], v[keep]
+    return tuple(np.concatenate([p[k] for p in pieces]) for k in range(3))
 
 
 def _pair_pass(args, chunks, capacity):

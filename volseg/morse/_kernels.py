@@ -347,18 +347,16 @@ def group_by_cell(vertices, cell, n_cells, starts, members):
 @numba.njit(cache=True, nogil=True)
 def _pairs_of_cells(values, members, starts, visit, lo, hi, grid, offsets, indptr, indices,
                     cell, degree, out_a, out_b, out_v, start, capacity, table_size):
-    """The cells a in visit[lo:hi], each with every other cell b its vertices' forward
-    edges reach (to a neighbour u > v: `offsets` are the grid's positive ones) and the
-    highest saddle of those edges. Every edge is walked once, from its lower-index
-    end, so a pair of cells may come out twice, once from each side (`two_sided`
-    merges them); walking every neighbour read each edge twice.
+    """Unique cell pairs (a, b), a in visit[lo:hi] and b > a, each with its highest saddle.
 
-    An edge's saddle is its lower end. a's partners are found through a small
-    open-addressing table (`table[slot]` = 1 + index into part_*, 0 if free) sized
-    for a's edges, so it stays in cache; only the slots a used are cleared afterwards.
-    Writes the first `capacity` entries from out_*[start]; returns how many there
-    were. The table and its columns are made here, not in `cell_pairs`' parallel
-    loop: numba compiles a loop body with allocations of its own for longer.
+    For every vertex of cell a and every neighbour u in a cell b > a, the edge's saddle
+    is its lower end. a's partners are found through a small open-addressing table
+    (`table[slot]` = 1 + index into part_*, 0 if free) sized for a's vertex count, so
+    it stays in cache; only the slots a used are cleared afterwards. An edge between
+    two cells is seen from the smaller cell only. Writes the first `capacity` pairs
+    from out_*[start]; returns how many there were. The table and its columns are
+    made here, not in `cell_pairs`' parallel loop: numba compiles a loop body with
+    allocations of its own for longer.
     """
     room = table_size // 2
     table = np.zeros(table_size, dtype=np.int32)
@@ -382,10 +380,8 @@ def _pairs_of_cells(values, members, starts, visit, lo, hi, grid, offsets, indpt
             count = len(offsets) if grid else indptr[v + 1] - indptr[v]
             for t in range(count):
                 u = v + offsets[t] if grid else indices[indptr[v] + t]
-                if u < v:               # a backward edge: walked from its other end
-                    continue
                 b = cell[u]
-                if b == a or b < 0:     # the same cell, or off the vertices
+                if b <= a:  # the same cell, a smaller one (seen from there), or off the vertices
                     continue
                 fu = values[u]
                 v_higher = (fv > fu) | ((fv == fu) & (v > u))
@@ -417,39 +413,6 @@ def _pairs_of_cells(values, members, starts, visit, lo, hi, grid, offsets, indpt
                 out_v[start + n] = part_v[q]
             n += 1
     return n
-
-
-@numba.njit(cache=True, nogil=True)
-def two_sided(a, b, v, values, n_cells):
-    """Merge the pairs `_pairs_of_cells` found from both sides (each cell's entries
-    contiguous): an entry (a, b) with b < a is folded into b's entry for a, keeping
-    the higher saddle (by value, then index), or becomes (b, a) where b has none.
-    Returns keep (bool): the entries left, exactly one per pair, all with a < b."""
-    first = np.full(n_cells, -1, dtype=np.int64)
-    count = np.zeros(n_cells, dtype=np.int64)
-    for i in range(len(a)):
-        if first[a[i]] < 0:
-            first[a[i]] = i
-        count[a[i]] += 1
-    keep = np.ones(len(a), dtype=np.bool_)
-    for i in range(len(a)):
-        x, y = a[i], b[i]
-        if y > x:
-            continue
-        found = -1
-        if first[y] >= 0:
-            for j in range(first[y], first[y] + count[y]):
-                if b[j] == x:
-                    found = j
-                    break
-        if found < 0:
-            a[i], b[i] = y, x
-            continue
-        w, s = v[found], v[i]
-        if values[s] > values[w] or (values[s] == values[w] and s > w):
-            v[found] = s
-        keep[i] = False
-    return keep
 
 
 @numba.njit(cache=True, parallel=True)

@@ -139,11 +139,12 @@ def _pairs_of_block(halo_values, halo_cells, origin, shape, offsets):
     The in-memory cross-edge pass (`_edges._cross_edges`) runs on the block with its
     halo as the padded field: the owned voxels in the mask are its vertices, the halo
     holds the neighbours' values (-inf outside the volume and the mask, where the
-    cell is -1: no cell, not a partner). An edge is walked from its lower-index end,
-    so each edge between two blocks is found by the block that owns that end. Cells
-    are renumbered in increasing order (the pairs and ties keep the in-memory order)
-    and `spanning_forest` keeps the block's forest of the highest saddles per pair,
-    in the in-memory order."""
+    cell stays -1: no cell, never a partner, rather than a local id that only its
+    place first in the order kept out). An edge is seen from its smaller cell's
+    voxel, so each edge between two blocks is found by one of them. Cells are
+    renumbered in increasing order (the pairs and ties keep the in-memory order) and
+    `spanning_forest` keeps the block's forest of the highest saddles per pair, in
+    the in-memory order."""
     faces = _faces(halo_cells, origin, shape)
     values = np.ascontiguousarray(halo_values, dtype=np.float64)
     cells, local = places(halo_cells)
