@@ -137,3 +137,43 @@ def test_cross_edges_are_one_per_pair_with_its_highest_saddle(seed, n_cells, kin
     assert dict(zip(zip(a.tolist(), b.tolist(), strict=True), saddle.tolist(),
                     strict=True)) == want
     assert len(a) == len(want)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.integers(0, 5), min_size=1, max_size=12), st.data())
+def test_per_chunk_reductions_cover_every_cell_of_every_chunk(counts, data):
+    """The chunks' vertex counts and largest partner bounds are reduced over exactly
+    their own cells, 0 for an empty chunk: a chunk followed by empty ones at the end
+    keeps its last cell (its partner table was sized without it, and the walk wrote
+    past the table: a segfault in CI)."""
+    from volseg.morse._edges import _per_chunk
+
+    values = np.array(counts, dtype=np.int64)
+    inner = sorted(data.draw(st.lists(st.integers(0, len(values)), max_size=6)))
+    bounds = np.array([0, *inner, len(values)], dtype=np.int64)
+    for ufunc, reduce in ((np.add, sum), (np.maximum, lambda part: max(part, default=0))):
+        want = [reduce(values[a:b].tolist()) for a, b in zip(bounds[:-1], bounds[1:],
+                                                              strict=True)]
+        assert _per_chunk(ufunc, values, bounds).tolist() == want
+
+
+def test_a_large_last_cell_sharing_its_chunk_gets_a_table_of_its_size():
+    """A star: 100 one-vertex cells, each joined to its own vertex of a 100-vertex cell
+    visited last, in chunks of 7 vertices, so that cell shares its chunk and empty
+    chunks follow: every pair comes out once (before, the chunk's partner table was
+    sized without the large cell)."""
+    from volseg.morse import _edges
+    from volseg.morse._graph import _neighbourhood
+
+    k = 100
+    values = np.arange(2 * k, dtype=float)[::-1].copy()
+    graph = _neighbourhood(values, None, np.stack([np.arange(k), k + np.arange(k)], axis=1),
+                           "kuhn")
+    cell = np.concatenate([1 + np.arange(k), np.zeros(k)]).astype(np.int32)
+    old, _edges._CHUNK_VERTICES = _edges._CHUNK_VERTICES, 7
+    try:
+        a, b, saddle = _edges._cross_edges(graph, cell, k + 1)
+    finally:
+        _edges._CHUNK_VERTICES = old
+    assert sorted(zip(a.tolist(), b.tolist(), saddle.tolist(), strict=True)) == [
+        (0, i + 1, k + i) for i in range(k)]

@@ -54,14 +54,12 @@ def _cross_edges(graph, cell, n_cells, *, cells_mark_vertices=False):
     bounds[-1] = n_cells
     chunks = np.arange(n_chunks, dtype=np.int64)
     cells_in = np.diff(bounds)
-    vertices_in = np.add.reduceat(counts_in_order, np.minimum(bounds[:-1], n_cells - 1))
-    vertices_in[cells_in == 0] = 0
+    vertices_in = _per_chunk(np.add, counts_in_order, bounds)
     capacity = 10 * cells_in + vertices_in // 16 + 1024
     degree = len(offsets) if grid else int(np.diff(indptr).max(initial=0))
     # Partner table per chunk: twice the largest partner bound of its cells, a power of 2.
     sizes = np.minimum(degree * counts_in_order, n_cells)
-    largest = np.maximum.reduceat(sizes, np.minimum(bounds[:-1], n_cells - 1))
-    largest[cells_in == 0] = 0  # empty chunks (reduceat gives them a neighbour's)
+    largest = _per_chunk(np.maximum, sizes, bounds)
     table_sizes = np.maximum(16, 2 ** np.ceil(np.log2(np.maximum(2 * largest, 1)))).astype(np.int64)
     args = (flat, members, starts, visit, bounds, grid, offsets, indptr, indices, cell, degree,
             table_sizes)
@@ -78,6 +76,18 @@ def _cross_edges(graph, cell, n_cells, *, cells_mark_vertices=False):
             k = int(np.searchsorted(over, c))
             pieces.append([arr[room_starts[k]:room_starts[k] + counts[c]] for arr in room])
     return tuple(np.concatenate([p[k] for p in pieces]) for k in range(3))
+
+
+def _per_chunk(ufunc, values, bounds):
+    """`ufunc` reduced over each chunk's cells values[bounds[c]:bounds[c + 1]], 0 for
+    an empty chunk. ``ufunc.reduceat`` is given the non-empty chunks' starts only: with
+    every start (clipped to the last cell), a chunk followed by empty ones at the end
+    lost its last cell, and its partner table could be too small for that cell."""
+    out = np.zeros(len(bounds) - 1, dtype=values.dtype)
+    full = bounds[:-1] < bounds[1:]
+    if full.any():
+        out[full] = ufunc.reduceat(values, bounds[:-1][full])
+    return out
 
 
 def _pair_pass(args, chunks, capacity):
