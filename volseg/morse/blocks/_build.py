@@ -149,7 +149,8 @@ def _pairs_of_block(halo_values, halo_cells, origin, shape, offsets):
     values = np.ascontiguousarray(halo_values, dtype=np.float64)
     cells, local = places(halo_cells)
     if len(cells) and cells[0] < 0:     # no cell (outside the volume or the mask): -1
-        cells, local = cells[1:], local - 1
+        cells = cells[1:]
+        local -= 1
     strides = np.array([s // values.itemsize for s in values.strides], dtype=np.int64)
     owned = np.arange(values.size).reshape(values.shape)[1:-1, 1:-1, 1:-1].ravel()
     owned = owned[values.ravel()[owned] > -np.inf]         # the block's voxels in the mask
