@@ -153,6 +153,27 @@ def test_in_memory_vertices_in_chunks_are_ordered_by_rank(rng, monkeypatch):
         extinctions = now
 
 
+@pytest.mark.parametrize("dtype", [np.int32, np.int64])
+def test_counting_sort_leaves_out_negative_keys(rng, dtype):
+    """The counting sort both sweeps and the leaves use: indices by key, increasing
+    within a key (a stable argsort of the keys kept), keys below 0 left out of the
+    order and the starts; `key_counts` counts each key the same way."""
+    from volseg.morse import _kernels
+
+    keys = rng.integers(-3, 6, size=500).astype(dtype)
+    kept = np.flatnonzero(keys >= 0)
+    start = _kernels.key_starts(keys, 7)
+    order = np.full(start[-1], -9, dtype=np.int32)
+    _kernels.by_key(keys, start, order)
+    np.testing.assert_array_equal(order, kept[np.argsort(keys[kept], kind="stable")])
+    counts = np.bincount(keys[kept], minlength=7)
+    np.testing.assert_array_equal(start, np.concatenate([[0], np.cumsum(counts)]))
+    np.testing.assert_array_equal(_kernels.key_counts(keys, 7), counts)
+    again = np.empty_like(order)
+    np.testing.assert_array_equal(_kernels.counting_sort(keys, 7, again), start)
+    np.testing.assert_array_equal(again, order)
+
+
 def test_records_with_a_weight_per_vertex_are_weighted_values(rng, monkeypatch):
     """With one weight per vertex (a mesh's dual areas) a record is a vertex inside
     the mask: its cell, its rank, its weight as the count and weight x value as the

@@ -32,7 +32,7 @@ import numpy as np
 from .._distinct import index_type, slot_of
 from .._sizes import SizedByArrays
 from .._union_find import find_root
-from ._kernels import counting_sort
+from ._kernels import by_key, counting_sort, key_counts, key_starts
 from ._prune import masked_range
 
 __all__ = ["Basins", "RankedVertices", "BASINS", "records", "block_records", "joined",
@@ -194,7 +194,8 @@ def records(cells, field, saddle_value, weight, unit_of, scale_of):
     At 512^3 the records of one per vertex took 16 bytes a voxel, and the sweep's
     order 4 more."""
     cells, field = np.ravel(cells), np.ravel(field)
-    index = _index(int(cells.max(initial=0)), len(saddle_value))
+    n_cells = int(cells.max(initial=-1)) + 1
+    index = _index(max(n_cells - 1, 0), len(saddle_value))
     rank = _ranks(cells, field, -np.asarray(saddle_value, np.float64), index)
     if weight is not None and np.ndim(weight) > 0:
         inside = cells >= 0
@@ -202,10 +203,11 @@ def records(cells, field, saddle_value, weight, unit_of, scale_of):
         return Basins(cells[inside].astype(index), rank[inside], w, w * field[inside],
                       0.0, 1.0, 1.0)
     low, high = masked_range(cells, field)
-    n_cells = int(cells.max(initial=-1)) + 1
-    order = np.empty(int(np.count_nonzero(rank >= 0)), index_type(len(cells)))
-    start, areas = _by_rank(rank, cells, len(saddle_value) + 1, n_cells, order)
+    start = key_starts(rank, len(saddle_value) + 1)
+    order = np.empty(start[-1], index_type(len(cells)))
+    by_key(rank, start, order)
     del rank
+    areas = key_counts(cells, n_cells)
     return RankedVertices(cells, field, order, start, areas, low, unit_of(low, high),
                           scale_of(weight, 1.0))
 
@@ -234,27 +236,6 @@ def _ranks_into(cells, field, negated, rank):
     """rank[i]: the rank of vertex i (`_rank`), -1 outside the mask (cell < 0)."""
     for i in range(len(cells)):
         rank[i] = _rank(negated, field[i]) if cells[i] >= 0 else -1
-
-
-@numba.njit(cache=True, nogil=True)
-def _by_rank(rank, cells, n_ranks, n_cells, order):
-    """A counting sort of the vertices inside the mask (rank >= 0) by rank into
-    `order` (increasing index within a rank); returns each rank's start (n_ranks + 1,)
-    and each cell's vertex count (n_cells,)."""
-    start = np.zeros(n_ranks + 1, dtype=np.int64)
-    areas = np.zeros(n_cells, dtype=np.int64)
-    for i in range(len(rank)):
-        if rank[i] >= 0:
-            start[rank[i] + 1] += 1
-            areas[cells[i]] += 1
-    for r in range(n_ranks):
-        start[r + 1] += start[r]
-    fill = start[:-1].copy()
-    for i in range(len(rank)):
-        if rank[i] >= 0:
-            order[fill[rank[i]]] = i
-            fill[rank[i]] += 1
-    return start, areas
 
 
 def saliency(basins, source, target, saddle_value, n_max: int, volume: bool) -> np.ndarray:

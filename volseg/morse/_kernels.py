@@ -448,17 +448,45 @@ def roots(vertices, up):
 
 
 @numba.njit(cache=True, nogil=True)
-def counting_sort(keys, n_keys, order):
-    """A stable counting sort of `keys` (each in 0..n_keys-1): fills `order` (its
-    type the caller's) with the indices by key and returns each key's start (n_keys
-    + 1,): key k's indices, increasing, are order[start[k]:start[k + 1]]."""
-    start = np.zeros(n_keys + 1, dtype=np.int64)
+def key_counts(keys, n_keys):
+    """(n_keys,) how many of `keys` hold each key in 0..n_keys-1; keys below 0 are
+    left out."""
+    count = np.zeros(n_keys, dtype=np.int64)
     for i in range(len(keys)):
-        start[keys[i] + 1] += 1
+        if keys[i] >= 0:
+            count[keys[i]] += 1
+    return count
+
+
+@numba.njit(cache=True, nogil=True)
+def key_starts(keys, n_keys):
+    """(n_keys + 1,) where each key's indices start in a counting sort of `keys`
+    (`by_key`); the last entry counts the keys not below 0."""
+    count = key_counts(keys, n_keys)
+    start = np.zeros(n_keys + 1, dtype=np.int64)
     for k in range(n_keys):
-        start[k + 1] += start[k]
+        start[k + 1] = start[k] + count[k]
+    return start
+
+
+@numba.njit(cache=True, nogil=True)
+def by_key(keys, start, order):
+    """The scatter of a stable counting sort: fills `order` (start[-1] long, its type
+    the caller's) with the indices of `keys` by key, increasing within a key, key k's
+    at order[start[k]:start[k + 1]]; keys below 0 are left out."""
     fill = start[:-1].copy()
     for i in range(len(keys)):
-        order[fill[keys[i]]] = i
-        fill[keys[i]] += 1
+        k = keys[i]
+        if k >= 0:
+            order[fill[k]] = i
+            fill[k] += 1
+
+
+@numba.njit(cache=True, nogil=True)
+def counting_sort(keys, n_keys, order):
+    """A stable counting sort of `keys` (each in 0..n_keys-1, or below 0 to leave
+    out): fills `order` with the indices by key (`by_key`) and returns each key's
+    start (n_keys + 1,)."""
+    start = key_starts(keys, n_keys)
+    by_key(keys, start, order)
     return start
