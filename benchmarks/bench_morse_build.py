@@ -2,9 +2,12 @@
 
     python benchmarks/bench_morse_build.py --base 728641a             # 256^3, 5 rounds
     python benchmarks/bench_morse_build.py --base 728641a --size 128 --rounds 9
+    python benchmarks/bench_morse_build.py --base 728641a --field smooth
 
 The field is `bench_kernels.py`'s: the weighted curvature of an 8-bit smoothed random
-volume (389,020 maxima at 256^3), made once and read from .npy by both sides. Each
+volume (389,020 maxima at 256^3), or with `--field smooth` that smoothed volume itself
+before quantizing (11,599 maxima at 256^3: few large cells, like TTK's anchor field and
+a gradient's basins), made once and read from .npy by both sides. Each
 round runs the base revision (a temporary git worktree) and today's code in two fresh
 interpreters, one after the other, each timing two builds after a warm-up (compiled
 kernels load from numba's cache; nothing is compiled in the timed calls). The machine
@@ -29,8 +32,11 @@ import numpy as np
 from scipy.ndimage import gaussian_filter
 from volseg.curvature import grid_curvature
 f = gaussian_filter(np.random.default_rng(0).standard_normal(({n}, {n}, {n})), 3.0)
-f = np.round(255 * (f - f.min()) / np.ptp(f)).astype(np.uint8)
-np.save({path!r}, grid_curvature(f, "weighted"))
+if {smooth}:
+    np.save({path!r}, f)
+else:
+    f = np.round(255 * (f - f.min()) / np.ptp(f)).astype(np.uint8)
+    np.save({path!r}, grid_curvature(f, "weighted"))
 """
 
 BUILD = """
@@ -57,10 +63,11 @@ def main():
     p.add_argument("--base", required=True, help="git revision to compare against")
     p.add_argument("--size", type=int, default=256)
     p.add_argument("--rounds", type=int, default=5)
+    p.add_argument("--field", choices=("curvature", "smooth"), default="curvature")
     args = p.parse_args()
     with worktree(args.base) as base, tempfile.TemporaryDirectory() as tmp:
         path = str(Path(tmp) / "field.npy")
-        run(FIELD, tree=str(ROOT), n=args.size, path=path)
+        run(FIELD, tree=str(ROOT), n=args.size, path=path, smooth=args.field == "smooth")
         old, new = [], []
         for k in range(args.rounds):
             old.append(run(BUILD, tree=str(base), path=path))

@@ -102,15 +102,16 @@ def _pairs_by_definition(graph, cell):
     return {key: int(saddle) for key, (_, saddle) in best.items()}
 
 
-@settings(max_examples=25, deadline=None)
+@settings(max_examples=40, deadline=None)
 @given(st.integers(0, 2**31), st.integers(1, 30), st.sampled_from(["kuhn", 6, 26, "graph"]),
-       st.sampled_from([1 << 20, 7, 1]))
-def test_cross_edges_are_one_per_pair_with_its_highest_saddle(seed, n_cells, kind, chunk):
-    """`_cross_edges` walks each edge once, from its lower-index end, and merges the
-    pairs found from both sides: exactly the pairs of cells joined by an edge, a < b,
-    each with the highest lower end of its edges, as walking every neighbour finds
-    them; with ties in the values, a mask, cells in any layout, and chunks of one
-    vertex up (so the chunks overflow and are rerun)."""
+       st.sampled_from([1 << 20, 7, 1]), st.sampled_from([0.0, np.inf]))
+def test_cross_edges_are_one_per_pair_with_its_highest_saddle(seed, n_cells, kind, chunk,
+                                                              one_sided_below):
+    """`_cross_edges`, walking every neighbour (`_ONE_SIDED_BELOW` 0) or each edge
+    once from its lower-index end with the pairs found from both sides merged (inf):
+    exactly the pairs of cells joined by an edge, a < b, each with the highest lower
+    end of its edges; with ties in the values, a mask, cells in any layout, and chunks
+    of one vertex up (so the chunks overflow and are rerun)."""
     from volseg.morse import _edges
     from volseg.morse._graph import _neighbourhood
 
@@ -128,11 +129,12 @@ def test_cross_edges_are_one_per_pair_with_its_highest_saddle(seed, n_cells, kin
     cell = np.full(len(graph.values), -1, dtype=np.int32)
     cell[graph.vertices] = rng.integers(0, n_cells, len(graph.vertices))
     want = _pairs_by_definition(graph, cell)
-    old, _edges._CHUNK_VERTICES = _edges._CHUNK_VERTICES, chunk
+    old = _edges._CHUNK_VERTICES, _edges._ONE_SIDED_BELOW
+    _edges._CHUNK_VERTICES, _edges._ONE_SIDED_BELOW = chunk, one_sided_below
     try:
         a, b, saddle = _edges._cross_edges(graph, cell, n_cells)
     finally:
-        _edges._CHUNK_VERTICES = old
+        _edges._CHUNK_VERTICES, _edges._ONE_SIDED_BELOW = old
     assert (a < b).all()
     assert dict(zip(zip(a.tolist(), b.tolist(), strict=True), saddle.tolist(),
                     strict=True)) == want

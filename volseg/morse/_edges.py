@@ -13,12 +13,18 @@ __all__ = []
 #: Vertices per chunk of the cross-edge pass (a chunk is a run of cells).
 _CHUNK_VERTICES = 1 << 20
 
+#: The pass walks each edge once (and merges the pairs found from both sides) when
+#: there are fewer cells than this per vertex; else every neighbour of every vertex.
+_ONE_SIDED_BELOW = 0.01
 
-def _cross_edges(graph, cell, n_cells, *, cells_mark_vertices=False):
+
+def _cross_edges(graph, cell, n_cells, *, cells_mark_vertices=False, one_sided=None):
     """(a, b, saddle) of every pair of adjacent cells, a < b, with its highest saddle.
     `cells_mark_vertices`: the vertices are exactly the nodes whose cell is not -1 (in
     memory; a block's halo nodes have cells too), so the grouping reads `cell` alone
     and the vertex list is freed before it (4 bytes a voxel off the build's peak).
+    `one_sided`: walk each edge once (True) or every neighbour (False); None chooses
+    by the cells per vertex (below).
 
     The vertices are grouped by cell (a counting sort), then each cell's edges to
     cells with a larger id are reduced to one per partner: exactly one edge per pair,
@@ -29,6 +35,14 @@ def _cross_edges(graph, cell, n_cells, *, cells_mark_vertices=False):
     (quantized fields need about 8 per cell), and the chunks that overflow are rerun
     with exact room. The grouping is freed before the pieces are joined, so the peak
     stays near the field's own arrays (about 24 bytes per voxel in all at 256^3).
+
+    That walk reads every edge twice, once from each end. With few cells (fewer than
+    `_ONE_SIDED_BELOW` per vertex: a smooth field, a gradient's basins) it walks each
+    edge once, from its lower-index end, keeps every partner cell and merges the
+    pairs found from both sides (`_kernels.two_sided`, room for twice the entries):
+    the same pairs, the pass 1.7x faster at 256^3 on a smooth field (11 599 cells).
+    With many cells the merge's random reads cost more than the walk saves (0.95x on
+    the curvature field, 389 020 cells).
     """
     flat, grid, offsets, indptr, indices = (graph.values, graph.grid, graph.offsets,
                                             graph.indptr, graph.indices)
@@ -55,14 +69,21 @@ def _cross_edges(graph, cell, n_cells, *, cells_mark_vertices=False):
     chunks = np.arange(n_chunks, dtype=np.int64)
     cells_in = np.diff(bounds)
     vertices_in = _per_chunk(np.add, counts_in_order, bounds)
-    capacity = 10 * cells_in + vertices_in // 16 + 1024
+    if one_sided is None:
+        one_sided = n_cells < _ONE_SIDED_BELOW * n_real
+    if one_sided:
+        capacity = 20 * cells_in + vertices_in // 8 + 1024
+        if grid:                    # forward edges only: the other half walked from there
+            offsets = np.ascontiguousarray(offsets[offsets > 0])
+    else:
+        capacity = 10 * cells_in + vertices_in // 16 + 1024
     degree = len(offsets) if grid else int(np.diff(indptr).max(initial=0))
     # Partner table per chunk: twice the largest partner bound of its cells, a power of 2.
     sizes = np.minimum(degree * counts_in_order, n_cells)
     largest = _per_chunk(np.maximum, sizes, bounds)
     table_sizes = np.maximum(16, 2 ** np.ceil(np.log2(np.maximum(2 * largest, 1)))).astype(np.int64)
     args = (flat, members, starts, visit, bounds, grid, offsets, indptr, indices, cell, degree,
-            table_sizes)
+            one_sided, table_sizes)
     out, out_starts, counts = _pair_pass(args, chunks, capacity)
     over = np.flatnonzero(counts > capacity)
     if len(over):
@@ -75,7 +96,14 @@ def _cross_edges(graph, cell, n_cells, *, cells_mark_vertices=False):
         else:
             k = int(np.searchsorted(over, c))
             pieces.append([arr[room_starts[k]:room_starts[k] + counts[c]] for arr in room])
-    return tuple(np.concatenate([p[k] for p in pieces]) for k in range(3))
+    a, b, v = (np.concatenate([p[k] for p in pieces]) for k in range(3))
+    if not one_sided:
+        return a, b, v
+    del pieces, out
+    if len(over):
+        del room
+    keep = _kernels.two_sided(a, b, v, flat, n_cells)
+    return a[keep], b[keep], v[keep]
 
 
 def _per_chunk(ufunc, values, bounds):
@@ -91,14 +119,15 @@ def _per_chunk(ufunc, values, bounds):
 
 
 def _pair_pass(args, chunks, capacity):
-    flat, members, starts, visit, bounds, grid, offsets, indptr, indices, cell, degree, sizes = args
+    (flat, members, starts, visit, bounds, grid, offsets, indptr, indices, cell, degree,
+     one_sided, sizes) = args
     out_starts = np.concatenate([[0], np.cumsum(capacity)[:-1]]).astype(np.int64)
     counts = np.zeros(len(chunks), dtype=np.int64)
     total = int(capacity.sum())
     out = [np.empty(total, dtype=cell.dtype), np.empty(total, dtype=cell.dtype),
            np.empty(total, dtype=members.dtype)]
     _kernels.cell_pairs(flat, members, starts, visit, bounds, chunks, grid, offsets, indptr,
-                       indices, cell, degree, sizes, *out, out_starts,
+                       indices, cell, degree, one_sided, sizes, *out, out_starts,
                        capacity.astype(np.int64), counts)
     return out, out_starts, counts
 

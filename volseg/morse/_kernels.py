@@ -346,17 +346,20 @@ def group_by_cell(vertices, cell, n_cells, starts, members):
 
 @numba.njit(cache=True, nogil=True)
 def _pairs_of_cells(values, members, starts, visit, lo, hi, grid, offsets, indptr, indices,
-                    cell, degree, out_a, out_b, out_v, start, capacity, table_size):
-    """Unique cell pairs (a, b), a in visit[lo:hi] and b > a, each with its highest saddle.
+                    cell, degree, one_sided, out_a, out_b, out_v, start, capacity, table_size):
+    """Unique cell pairs (a, b), a in visit[lo:hi] and b > a, each with its highest saddle;
+    with `one_sided`, each cell a with every other cell b its vertices' forward edges
+    reach instead (to a neighbour u > v; a grid's `offsets` are then its positive
+    ones), so a pair may come out once from each side (`two_sided` merges them).
 
-    For every vertex of cell a and every neighbour u in a cell b > a, the edge's saddle
-    is its lower end. a's partners are found through a small open-addressing table
-    (`table[slot]` = 1 + index into part_*, 0 if free) sized for a's vertex count, so
-    it stays in cache; only the slots a used are cleared afterwards. An edge between
-    two cells is seen from the smaller cell only. Writes the first `capacity` pairs
-    from out_*[start]; returns how many there were. The table and its columns are
-    made here, not in `cell_pairs`' parallel loop: numba compiles a loop body with
-    allocations of its own for longer.
+    For every vertex of cell a and every neighbour u in a cell b > a (any b != a when
+    one-sided), the edge's saddle is its lower end. a's partners are found through a
+    small open-addressing table (`table[slot]` = 1 + index into part_*, 0 if free)
+    sized for a's vertex count, so it stays in cache; only the slots a used are
+    cleared afterwards. Writes the first `capacity` entries from out_*[start]; returns
+    how many there were. The table and its columns are made here, not in
+    `cell_pairs`' parallel loop: numba compiles a loop body with allocations of its
+    own for longer.
     """
     room = table_size // 2
     table = np.zeros(table_size, dtype=np.int32)
@@ -368,6 +371,7 @@ def _pairs_of_cells(values, members, starts, visit, lo, hi, grid, offsets, indpt
     n_cells = len(starts) - 1
     for p in range(lo, hi):
         a = visit[p]
+        floor = 0 if one_sided else a + 1   # partners b >= floor, b != a
         bound = min(degree * (starts[a + 1] - starts[a]), n_cells)
         size = 16
         while size < 2 * bound:
@@ -377,11 +381,14 @@ def _pairs_of_cells(values, members, starts, visit, lo, hi, grid, offsets, indpt
         for idx in range(starts[a], starts[a + 1]):
             v = members[idx]
             fv = values[v]
+            lowest = v if one_sided else -1     # one-sided: backward edges come from u
             count = len(offsets) if grid else indptr[v + 1] - indptr[v]
             for t in range(count):
                 u = v + offsets[t] if grid else indices[indptr[v] + t]
                 b = cell[u]
-                if b <= a:  # the same cell, a smaller one (seen from there), or off the vertices
+                # the same cell, off the vertices (-1), a smaller one seen from there
+                # or a backward edge walked from its other end: one branch for all
+                if (b < floor) | (b == a) | (u < lowest):
                     continue
                 fu = values[u]
                 v_higher = (fv > fu) | ((fv == fu) & (v > u))
@@ -415,9 +422,43 @@ def _pairs_of_cells(values, members, starts, visit, lo, hi, grid, offsets, indpt
     return n
 
 
+@numba.njit(cache=True, nogil=True)
+def two_sided(a, b, v, values, n_cells):
+    """Merge the pairs a one-sided `_pairs_of_cells` found from both sides (each cell's
+    entries contiguous): an entry (a, b) with b < a is folded into b's entry for a,
+    keeping the higher saddle (by value, then index), or becomes (b, a) where b has
+    none. Returns keep (bool): the entries left, exactly one per pair, all a < b."""
+    first = np.full(n_cells, -1, dtype=np.int64)
+    count = np.zeros(n_cells, dtype=np.int64)
+    for i in range(len(a)):
+        if first[a[i]] < 0:
+            first[a[i]] = i
+        count[a[i]] += 1
+    keep = np.ones(len(a), dtype=np.bool_)
+    for i in range(len(a)):
+        x, y = a[i], b[i]
+        if y > x:
+            continue
+        found = -1
+        if first[y] >= 0:
+            for j in range(first[y], first[y] + count[y]):
+                if b[j] == x:
+                    found = j
+                    break
+        if found < 0:
+            a[i], b[i] = y, x
+            continue
+        w, s = v[found], v[i]
+        if values[s] > values[w] or (values[s] == values[w] and s > w):
+            v[found] = s
+        keep[i] = False
+    return keep
+
+
 @numba.njit(cache=True, parallel=True)
 def cell_pairs(values, members, starts, visit, bounds, chunks, grid, offsets, indptr, indices,
-               cell, degree, table_sizes, out_a, out_b, out_v, out_starts, capacity, counts):
+               cell, degree, one_sided, table_sizes, out_a, out_b, out_v, out_starts, capacity,
+               counts):
     """`_pairs_of_cells` over cells visit[bounds[c]:bounds[c + 1]] for c in `chunks`, in
     parallel (one partner table per chunk, `table_sizes[c]` slots: room for the largest
     cell's bound). Chunking is fixed, so the output does not depend on the thread
@@ -425,8 +466,9 @@ def cell_pairs(values, members, starts, visit, bounds, chunks, grid, offsets, in
     for i in numba.prange(len(chunks)):
         c = chunks[i]
         counts[i] = _pairs_of_cells(values, members, starts, visit, bounds[c], bounds[c + 1],
-                                    grid, offsets, indptr, indices, cell, degree, out_a, out_b,
-                                    out_v, out_starts[i], capacity[i], table_sizes[c])
+                                    grid, offsets, indptr, indices, cell, degree, one_sided,
+                                    out_a, out_b, out_v, out_starts[i], capacity[i],
+                                    table_sizes[c])
 
 
 @numba.njit(cache=True, nogil=True)

@@ -161,7 +161,11 @@ def _pairs_of_block(halo_values, halo_cells, origin, shape, offsets):
         return (nothing, nothing, np.zeros(0, dtype=gid_type), np.zeros(0), *faces)
     graph = _Neighbourhood(values.ravel(), owned, True, offsets @ strides,
                            np.zeros(1, np.int64), np.zeros(1, np.int64), values.shape)
-    a, b, saddle = _cross_edges(graph, local.ravel(), len(cells))
+    # Every neighbour, in every block: were each block to choose the one-sided walk by
+    # its own cells, an edge over a face between a one-sided block (which leaves it to
+    # the edge's lower-index end) and a block walking every neighbour (which leaves it
+    # to the smaller cell) could be found by neither.
+    a, b, saddle = _cross_edges(graph, local.ravel(), len(cells), one_sided=False)
     keep = spanning_forest(graph.values[saddle], saddle, a, b, len(cells))
     a, b, saddle = a[keep], b[keep], saddle[keep]
     i, j, k = np.unravel_index(saddle, values.shape)
