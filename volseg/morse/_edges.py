@@ -37,12 +37,16 @@ def _cross_edges(graph, cell, n_cells, *, cells_mark_vertices=False, one_sided=N
     stays near the field's own arrays (about 24 bytes per voxel in all at 256^3).
 
     That walk reads every edge twice, once from each end. With few cells (fewer than
-    `_ONE_SIDED_BELOW` per vertex: a smooth field, a gradient's basins) it walks each
-    edge once, from its lower-index end, keeps every partner cell and merges the
-    pairs found from both sides (`_kernels.two_sided`, room for twice the entries):
-    the same pairs, the pass 1.7x faster at 256^3 on a smooth field (11 599 cells).
-    With many cells the merge's random reads cost more than the walk saves (0.95x on
-    the curvature field, 389 020 cells).
+    `_ONE_SIDED_BELOW` per vertex: a smooth field, the value field, the curvature of
+    most of the five datasets) it walks each edge once, from its lower-index end,
+    keeps every partner cell and merges the pairs found from both sides
+    (`_kernels.two_sided`, room for twice the entries): the same pairs, the pass
+    1.34x faster at 256^3 on a smooth field (11 794 cells: 0.79 -> 0.59 s). With many
+    cells the merge's random reads cost more than the walk saves (0.95x on the
+    synthetic curvature field, 389 020 cells at 256^3). On the small real volumes the
+    one-sided walk also won above the threshold (tooth's curvature, 0.018 cells a
+    vertex: 40 -> 30 ms), where the merge stays in cache; the threshold is kept low
+    for the large ones. Blocks pass False (`blocks._build._pairs_of_block`).
     """
     flat, grid, offsets, indptr, indices = (graph.values, graph.grid, graph.offsets,
                                             graph.indptr, graph.indices)
