@@ -8,10 +8,11 @@ The elder-rule sweep runs on the cell graph, not on every vertex: inside a
 descending cell the superlevel set is connected through the cell's maximum (steepest
 ascent stays above), so components merge only across edges between cells, and
 Kruskal over those edges, ordered by their lower endpoint, is the vertex sweep.
-`cell_pairs` keeps exactly the highest edge per pair of adjacent cells (only that
-one can ever join two components); `kruskal` then runs a union-find over maxima.
-Sweeping the cell-boundary vertices in value order instead was 3x slower at 256^3
-(random access into the whole field).
+`cell_pairs` (with `two_sided` where it walks each edge once) keeps exactly the
+highest edge per pair of adjacent cells (only that one can ever join two
+components); `kruskal` then runs a union-find over maxima. Sweeping the
+cell-boundary vertices in value order instead was 3x slower at 256^3 (random access
+into the whole field).
 """
 
 import numba
