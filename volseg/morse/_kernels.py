@@ -449,9 +449,8 @@ def two_sided(a, b, v, values, n_cells):
         if found < 0:
             a[i], b[i] = y, x
             continue
-        w, s = v[found], v[i]
-        if values[s] > values[w] or (values[s] == values[w] and s > w):
-            v[found] = s
+        if _higher(values, v[i], v[found]):
+            v[found] = v[i]
         keep[i] = False
     return keep
 
