@@ -322,3 +322,34 @@ def test_the_stage_sequence_with_blockwise_storage_equals_in_memory(tmp_path, sm
     assert any("smoothing" in line for line in said)
     storage.finish()
     assert not storage.work.folder.exists()
+
+
+def test_the_stages_after_the_curvature_read_it_from_the_work_folder(tmp_path, small):
+    """The curvature's blocks, kept in the work folder as its kernel computed them,
+    are what the Morse stage, the cut and the writers read (uncompressed), not the
+    output's zstd chunks: with the output removed right after it is written, the
+    result is still the in-memory one."""
+    import shutil
+
+    from volseg.blockwise import BlockwiseStorage
+    from volseg.outputs import output_names
+    from volseg.segment import SegmentRequest, run_stages
+
+    class Removing(BlockwiseStorage):
+        def curvature(self, field):
+            kept = super().curvature(field)
+            shutil.rmtree(self.paths["curvature"])
+            return kept
+
+    volume = np.round((small - small.min()) * 40).astype(np.uint8)
+    request = SegmentRequest.checked(n_regions=5, mask=None, smooth_sigma=0)
+    eager, _ = run_stages(volume, request)
+    lazy = da.from_array(volume, chunks=(7, 6, 5))
+    paths = {kind: tmp_path / name for kind, name in output_names(
+        "v", blockwise=True, voxels=volume.size).items()}
+    storage = Removing(lazy, request, paths, folder=tmp_path, stem="v", checksum="x",
+                       frame=None)
+    result, _ = run_stages(lazy, request, storage)
+    assert np.array_equal(np.asarray(result.labels), eager.labels)
+    assert np.array_equal(np.asarray(result.curvature), eager.curvature)
+    storage.finish()

@@ -136,3 +136,41 @@ def test_a_planted_link_is_removed_never_followed(tmp_path):
     whole.symlink_to(outside, target_is_directory=True)      # the folder itself a link
     fresh = WorkFolder(whole, {"input": "abc"})
     assert not whole.is_symlink() and not fresh.resumed and list(outside.iterdir()) == []
+
+
+def test_a_block_is_digested_once_per_process_and_its_file(tmp_path, monkeypatch):
+    """The digest of a saved block is computed when it is written and not again when
+    this process reads the same file back (a run reads each block several times); a
+    process that has not checked it (a resumed run, a worker) checks it once, and a
+    file replaced at the path (another inode, size or change time) is checked again."""
+    from volseg.blockwise import _resume
+
+    digests = []
+    real = _resume._digest
+
+    def counted(tag, items):
+        digests.append(tag)
+        return real(tag, items)
+
+    monkeypatch.setattr(_resume, "_digest", counted)
+    work = WorkFolder(tmp_path / "w", {"input": "abc"})
+    computed = []
+    block = work.wrap("stage", lambda x, block_id=None: computed.append(1) or x * 2)
+    expected = block(np.arange(50), block_id=(0, 0, 0))
+    assert len(digests) == 1                                          # written
+    for _ in range(3):
+        assert np.array_equal(block(np.arange(50), block_id=(0, 0, 0)), expected)
+    assert len(digests) == 1 and len(computed) == 1                   # read, not digested
+    _resume._CHECKED.clear()                                          # another process
+    assert np.array_equal(block(np.arange(50), block_id=(0, 0, 0)), expected)
+    block(np.arange(50), block_id=(0, 0, 0))
+    assert len(digests) == 2 and len(computed) == 1                   # checked once
+    # The same file replaced by another block's (a copy: a new inode): checked again,
+    # and refused, as its digest is of another place.
+    path = tmp_path / "w" / "stage" / "0_0_0.npz"
+    other = block(np.arange(50) + 1, block_id=(1, 0, 0))
+    (tmp_path / "w" / "stage" / "1_0_0.npz").rename(path)
+    assert np.array_equal(block(np.arange(50), block_id=(0, 0, 0)), expected)
+    assert len(computed) == 3 and not np.array_equal(other, expected)
+    work.remove()
+    assert not any(p.startswith(str(tmp_path)) for p in _resume._CHECKED)

@@ -14,7 +14,9 @@ present. A file appears by atomic rename once complete, so a run killed mid-writ
 leaves no block that looks finished, and it is fsynced first, so a power loss
 leaves it whole or absent; a torn block found anyway (empty, truncated: its zip
 CRCs disagree) is removed and computed again, and so is a block whose digest (the
-run's key, the stage, the block's index and its values) is not its own. A folder
+run's key, the stage, the block's index and its values) is not its own. The digest of
+a file is checked once per process (`_CHECKED`: a file with another inode, size or
+change time is checked again). A folder
 holding a link anywhere is emptied, the link removed, never followed. The pipeline
 removes the folder once its outputs are committed.
 """
@@ -75,6 +77,7 @@ class WorkFolder:
 
     def remove(self):
         shutil.rmtree(self.folder, ignore_errors=True)
+        _forget(self.folder)
 
 
 class _Cached:
@@ -96,6 +99,7 @@ class _Cached:
                  else {f"item{i}": np.asarray(r) for i, r in enumerate(result)})
         items[DIGEST] = np.frombuffer(_digest(f"{self.tag}/{name}", items), np.uint8)
         write_atomically(path, np.savez, durable=True, **items)
+        _CHECKED[path] = _identity(path, f"{self.tag}/{name}")
         return result
 
 
@@ -110,8 +114,32 @@ def _digest(tag: str, items: dict) -> bytes:
     for member in sorted(k for k in items if k != DIGEST):
         array = np.ascontiguousarray(items[member])
         digest.update(f"{member}:{array.dtype.str}:{array.shape}".encode())
-        digest.update(array.tobytes())
+        digest.update(array.reshape(-1).view(np.uint8))     # its bytes, not a copy
     return digest.digest()
+
+
+#: The saved blocks whose digest this process wrote or checked: path -> `_identity`.
+#: A block is read several times in a run (each pass over a stage, and each neighbour's
+#: halo), and SHA-256 over every read was 2-8 % of a 512^3 run's CPU time. A file
+#: that is not the one checked (replaced, rewritten: another inode, size or change
+#: time) is checked again; only a writer racing this process, rewriting a block in
+#: place to the same size within one tick of the file system's clock, would not be.
+_CHECKED: dict = {}
+
+
+def _identity(file, tag: str) -> tuple:
+    """What tells a saved block's file from any other at its path: the tag it was
+    saved for and the file's inode, size, modification and change times (`file`: a
+    path or an open file's descriptor)."""
+    st = os.stat(file)
+    return tag, st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns
+
+
+def _forget(folder: Path) -> None:
+    """Drop the checked blocks under `folder` (a work folder removed)."""
+    inside = os.path.join(str(folder), "")
+    for path in [p for p in _CHECKED if p.startswith(inside)]:
+        _CHECKED.pop(path, None)
 
 
 def _only_own_entries(folder: Path) -> bool:
@@ -139,10 +167,15 @@ def _load(path, tag: str = ""):
             raise ValueError("not a regular file")
         # (closed on any error)
         with NPY_READ_LOCK, open(path, "rb") as file, np.load(file) as saved:
+            identity = _identity(file.fileno(), tag)    # of the file read, not the path's
             members = {k: saved[k] for k in saved.files}
         stored = members.pop(DIGEST, None)
-        if stored is None or stored.tobytes() != _digest(tag, members):
-            raise ValueError("digest")
+        if stored is None:
+            raise ValueError("no digest")
+        if _CHECKED.get(path) != identity:
+            if stored.tobytes() != _digest(tag, members):
+                raise ValueError("digest")
+            _CHECKED[path] = identity
         if "array" in members:
             return members["array"]
         items = tuple(members[f"item{i}"] for i in range(len(members)))
@@ -150,6 +183,7 @@ def _load(path, tag: str = ""):
             raise ValueError("no arrays")
         return items
     except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile):
+        _CHECKED.pop(path, None)
         try:
             os.unlink(path)
         except OSError:
