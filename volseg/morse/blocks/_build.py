@@ -104,17 +104,19 @@ def _summary_of_block(halo, origin, shape, offsets, masked, ends_file=None):
     if ends_file is not None:
         _atomic.write_atomically(ends_file, np.save, result)
     a, b, c = result.shape
-    local = np.arange(result.size).reshape(result.shape)
-    gids = ((origin[0] + local // (b * c)) * shape[1] + origin[1] + (local // c) % b) * shape[2] \
-        + origin[2] + local % c
-    flat = result.ravel()
-    is_max = flat == gids.ravel()
-    inner = values[1:-1, 1:-1, 1:-1].ravel()
+    # Each row's first gid; a voxel's gid is its row's plus its place in the row.
+    rows = ((origin[0] + np.arange(a))[:, None] * shape[1] + origin[1] + np.arange(b)) \
+        * shape[2] + origin[2]
+    is_max = result == rows[:, :, None] + np.arange(c)    # a maximum's path ends at itself
+    inner = values[1:-1, 1:-1, 1:-1]
+    flat = result.reshape(-1)
     layer = _outer_layer(result)
     layer = layer[flat[layer] != kernels.OUTSIDE]
-    inside = inner[inner > -np.inf]
-    low_high = np.array([inside.min(), inside.max()] if len(inside) else [np.inf, -np.inf])
-    return (gids.ravel()[is_max], inner[is_max], gids.ravel()[layer], flat[layer], low_high)
+    # The range in the mask: -inf outside it (none without a mask: `_ascend` checked).
+    high = inner.max()
+    low = np.min(inner, where=inner > -np.inf, initial=np.inf) if masked else inner.min()
+    return (result[is_max], inner[is_max], rows.reshape(-1)[layer // c] + layer % c,
+            flat[layer], np.array([low, high]))
 
 
 def _cells_of_block(halo, origin, shape, offsets, masked, keys, ids):
