@@ -87,23 +87,38 @@ def looked_up(cells, ids, values, dtype, default=0):
     """Lazy array of `cells`' chunks: each voxel's value from its block's `values`
     (aligned with its `ids`), `default` outside the mask (cells < 0)."""
     def block(c, i, v):
-        out = np.empty(c.size, dtype=dtype)
-        lookup(c.ravel(), i.flat[0], v.flat[0], dtype(default), out)
-        return out.reshape(c.shape)
+        out = np.empty(c.shape, dtype=dtype)
+        lookup(np.ascontiguousarray(c), i.flat[0], v.flat[0], dtype(default), out)
+        return out
     return cells.map_blocks(block, ids, values, dtype=dtype,
                             meta=np.empty((0,) * cells.ndim, dtype))
 
 
 @numba.njit(cache=True, nogil=True)
 def lookup(cells, ids, values, default, out):
-    """out[i] = values[position of cells[i] in ids], `default` for cells < 0; a run of
-    one cell (along the fastest axis) is one search."""
-    last, at = -1, 0
-    for i in range(len(cells)):
-        c = cells[i]
-        if c < 0:
-            out[i] = default
-            continue
-        if c != last:
-            at, last = np.searchsorted(ids, c), c
-        out[i] = values[at]
+    """out[v] = values[position of cells[v] in ids] for a 3-D block, `default` where
+    cells < 0. A voxel in the cell of the voxel before it in its row, in the row
+    before or in the plane before reuses that voxel's position (kept for one plane);
+    only the others search `ids`: a cell spans a few voxels along each axis, and a
+    search per run along the rows alone was 3 % of a 512^3 blockwise run's CPU time."""
+    planes, rows, width = cells.shape
+    at_of = np.empty((rows, width), dtype=np.int64)     # the last plane's positions
+    for z in range(planes):
+        for y in range(rows):
+            last, at = -1, 0
+            for x in range(width):
+                c = cells[z, y, x]
+                if c < 0:
+                    out[z, y, x] = default
+                    last = -1
+                    continue
+                if c != last:
+                    if y > 0 and cells[z, y - 1, x] == c:
+                        at = at_of[y - 1, x]            # this plane's row before
+                    elif z > 0 and cells[z - 1, y, x] == c:
+                        at = at_of[y, x]                # not yet overwritten: the plane before
+                    else:
+                        at = np.searchsorted(ids, c)
+                    last = c
+                at_of[y, x] = at
+                out[z, y, x] = values[at]
