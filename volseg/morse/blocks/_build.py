@@ -54,7 +54,7 @@ from .._graph import _Neighbourhood, grid_offsets
 from .._phases import _Phases
 from . import _buckets, _exits, _ranks
 from . import _kernels as kernels
-from ._cells import table_cells
+from ._cells import lookup, table_cells
 from ._objects import only, per_block
 from ._on_workers import HierarchyOnWorkers
 
@@ -127,10 +127,14 @@ def _cells_of_block(halo, origin, shape, offsets, masked, keys, ids):
 
 
 def _cells_of_ends(result, keys, ids):
-    """The cells of a block from its voxels' path ends (`ascend`'s result)."""
-    cells = np.empty(result.size, dtype=ids.dtype)
-    kernels.cells_of_ends(result.ravel(), keys, ids, cells)
-    return cells.reshape(result.shape)
+    """The cells of a block from its voxels' path ends (`ascend`'s result): the gid
+    each path ends at (a maximum's, or the voxel an exit enters: -1 - end) looked up in
+    the block's table (`keys` sorted gids, `ids`), -1 for `OUTSIDE`."""
+    ends = np.where(result >= 0, result, -1 - result)
+    ends[result == kernels.OUTSIDE] = -1
+    cells = np.empty(result.shape, dtype=ids.dtype)
+    lookup(ends, keys, ids, ids.dtype.type(-1), cells)
+    return cells
 
 
 def _pairs_of_block(halo_values, halo_cells, origin, shape, offsets):

@@ -119,21 +119,3 @@ def _resolve(flat, block, origin, shape, up, final):
             for k in range(c):
                 if flat[halo_row + k] == -np.inf:
                     final[row + k] = OUTSIDE
-
-
-@numba.njit(cache=True, nogil=True)
-def cells_of_ends(ends, keys, ids, cells):
-    """cells[v]: the maximum id of `ends[v]` (an `ascend` result, flat) from the
-    block's table (`keys` sorted gids, `ids`): a maximum's gid or an exit's entered
-    voxel (-1 - end) is looked up; -1 for `OUTSIDE`. Neighbouring voxels mostly share
-    an end, so the last lookup is kept."""
-    last, found = OUTSIDE, -1
-    for v in range(ends.shape[0]):
-        end = ends[v]
-        if end == OUTSIDE:
-            cells[v] = -1
-            continue
-        if end != last:
-            found = ids[np.searchsorted(keys, end if end >= 0 else -1 - end)]
-            last = end
-        cells[v] = found
