@@ -97,11 +97,12 @@ def looked_up(cells, ids, values, dtype, default=0):
 @numba.njit(cache=True, nogil=True)
 def lookup(cells, ids, values, default, out):
     """out[v] = values[position of cells[v] in ids] for a 3-D block, `default` where
-    cells < 0 (cells: or any keys, e.g. the gids a block's paths end at,
-    `_build._cells_of_ends`). A voxel in the cell of the voxel before it in its row, in the row
-    before or in the plane before reuses that voxel's position (kept for one plane);
-    only the others search `ids`: a cell spans a few voxels along each axis, and a
-    search per run along the rows alone was 3 % of a 512^3 blockwise run's CPU time."""
+    cells < 0 (or any sorted keys: the gids a block's paths end at,
+    `_build._cells_of_ends`). A voxel in the cell of the voxel before it in its row,
+    in the row before or in the plane before reuses that voxel's position (kept for
+    one plane); only the others search `ids`: a cell spans a few voxels along each
+    axis, and a search per run along the rows alone was 3 % of a 512^3 blockwise
+    run's CPU time."""
     planes, rows, width = cells.shape
     at_of = np.empty((rows, width), dtype=np.int64)     # the last plane's positions
     for z in range(planes):
