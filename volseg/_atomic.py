@@ -9,7 +9,7 @@ import tempfile
 import threading
 from pathlib import Path
 
-__all__ = ["write_atomically", "temporary_beside"]
+__all__ = ["write_atomically", "temporary_beside", "file_identity"]
 
 
 def temporary_beside(path) -> Path:
@@ -22,6 +22,13 @@ def temporary_beside(path) -> Path:
     os.umask(umask)
     os.chmod(tmp, 0o666 & ~umask)
     return Path(tmp)
+
+
+def file_identity(info: os.stat_result) -> tuple:
+    """What tells a file from another at the same path, or from itself rewritten:
+    device, inode, size and modification time (of ``os.stat(path)`` or of an open
+    file's ``os.fstat``)."""
+    return info.st_dev, info.st_ino, info.st_size, info.st_mtime_ns
 
 
 def write_atomically(path, save, *args, durable: bool = False, **kwargs) -> None:

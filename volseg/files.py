@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from . import _validate
+from ._atomic import file_identity
 from ._distinct import label_type
 from ._jit_cache import noting_compilation
 from ._responsive import responsive
@@ -464,12 +465,8 @@ def _stages_saying_warnings(data, request, storage, name, say, source, keep_hier
 
 
 def _file_states(paths) -> dict:
-    """(size, mtime in ns, inode) of every file of an input, a store's files included."""
-    states = {}
-    for file in input_files(paths):
-        info = os.stat(file)
-        states[str(file)] = (info.st_size, info.st_mtime_ns, info.st_ino)
-    return states
+    """Every file of an input (a store's files included) by its `file_identity`."""
+    return {str(file): file_identity(os.stat(file)) for file in input_files(paths)}
 
 
 def _unchanged(paths, before: dict) -> None:

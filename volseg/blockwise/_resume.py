@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .._atomic import NPY_READ_LOCK, write_atomically
+from .._atomic import NPY_READ_LOCK, file_identity, write_atomically
 
 __all__ = ["WorkFolder"]
 
@@ -129,10 +129,10 @@ _CHECKED: dict = {}
 
 def _identity(file, tag: str) -> tuple:
     """What tells a saved block's file from any other at its path: the tag it was
-    saved for and the file's inode, size, modification and change times (`file`: a
-    path or an open file's descriptor)."""
-    st = os.stat(file)
-    return tag, st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns
+    saved for, its `file_identity` and its change time (`file`: a path or an open
+    file's descriptor)."""
+    info = os.stat(file)
+    return tag, *file_identity(info), info.st_ctime_ns
 
 
 def _forget(folder: Path) -> None:

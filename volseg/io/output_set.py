@@ -33,6 +33,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from .._atomic import file_identity
 from ..errors import OutputError  # noqa: F401 (re-exported)
 
 __all__ = ["OutputSet", "OutputError", "FolderLock", "recover", "committing", "read_set"]
@@ -268,7 +269,7 @@ def _identity(path: Path):
         info = os.stat(path)
     except FileNotFoundError:
         return None
-    return info.st_ino, info.st_dev, info.st_mtime_ns, info.st_size
+    return file_identity(info)
 
 
 def read_set(index, stem: str, read, *, tries: int = 40, pause: float = 0.05):
