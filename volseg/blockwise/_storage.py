@@ -143,7 +143,7 @@ class BlockwiseStorage(Storage):
                                                          dtype=values.dtype))
 
     def curvature(self, curvature):
-        written = self._written("curvature", curvature)
+        self._write("curvature", curvature)
         # The Morse stage and the writers read the field again and again (each pass,
         # each block's halo): the curvature's blocks, which its kernel kept in the work
         # folder as it computed them, are read from there rather than decoded from the
@@ -151,15 +151,18 @@ class BlockwiseStorage(Storage):
         # Another field (not kept there) is read from its output.
         if self.work.finished("curvature") == curvature.npartitions:
             return self.work.array("curvature", curvature.chunks, curvature.dtype)
-        return written
+        return read_zarr(self.paths["curvature"]).data
 
     def labels(self, labels, n_regions: int):
         return self._written("labels", labels.astype(label_type(n_regions)))
 
     def _written(self, kind: str, array):
+        self._write(kind, array)
+        return read_zarr(self.paths[kind]).data
+
+    def _write(self, kind: str, array):
         write_zarr(self.paths[kind], array, frame=self.frame,
                    compute=lambda x: self._run(x, stage=kind))
-        return read_zarr(self.paths[kind]).data
 
     def describe(self, hierarchy) -> dict:
         """The summary's ``blockwise`` entry."""
