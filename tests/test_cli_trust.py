@@ -512,7 +512,7 @@ def test_a_full_disk_names_the_folder_and_the_rerun_resumes(tmp_path, capsys, mo
     line = _one_clean_line(capsys.readouterr().err)
     assert str(tmp_path / "out") in line and "disk is full" in line
     assert _visible(tmp_path / "out") == []
-    assert len(list((tmp_path / "out" / ".v.volseg-work").rglob("*.npz"))) == 5
+    assert len(list((tmp_path / "out" / ".v.volseg-work").rglob("*.npys"))) == 5
     monkeypatch.setattr(_resume, "write_atomically", real)
     assert main([*argv, "-o", str(tmp_path / "out")]) == 0
     labels = [nibabel.load(tmp_path / f / "v_labels.nii.gz").get_fdata() for f in ("clean", "out")]

@@ -33,7 +33,7 @@ def file_identity(info: os.stat_result) -> tuple:
 
 def write_atomically(path, save, *args, durable: bool = False, **kwargs) -> None:
     """``save(file, *args, **kwargs)`` into a temporary file beside `path`, then renamed
-    to it. The temporary (``<path>.<pid>.<thread>.tmp``) matches no ``*.npz`` or
+    to it. The temporary (``<path>.<pid>.<thread>.tmp``) matches no ``*.npys`` or
     ``*.npy`` count of finished blocks, so a leftover of a killed run never looks
     finished. `durable`: the file is fsynced before the rename (a power loss then
     leaves it whole or absent, not renamed and empty)."""
@@ -56,6 +56,7 @@ def write_atomically(path, save, *args, durable: bool = False, **kwargs) -> None
 #: CPython 3.11's AST constructor keeps one recursion depth per interpreter, so two
 #: threads parsing at once can fail with "SystemError: AST constructor recursion depth
 #: mismatch" (python/cpython#106905). numpy parses every .npy header with
-#: `ast.literal_eval`, so the blocks the threaded engine's workers read back are read
-#: one at a time (a few ms each, beside seconds of work per block).
+#: `ast.literal_eval`, so the threaded engine's workers parse the headers of the
+#: blocks they read back one at a time (the work folder's blocks: only the headers,
+#: `blockwise._resume._read_array`; a path-ends file whole).
 NPY_READ_LOCK = threading.Lock()

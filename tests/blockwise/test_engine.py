@@ -102,7 +102,7 @@ def test_a_run_killed_in_the_cells_pass_resumes_from_the_kept_path_ends(tmp_path
     argv, expected, out = _whole_and_interrupted(tmp_path, volume, monkeypatch, "_cells_of_ends")
     work = out / ".vol.volseg-work"
     assert len(list((work / "ends").glob("*.npy"))) == 27
-    assert len(list((work / "cells").glob("*.npz"))) == 5
+    assert len(list((work / "cells").glob("*.npys"))) == 5
     ascend, climbs = _morse_blocks._ascend, []
     monkeypatch.setattr(_morse_blocks, "_ascend", lambda *a: climbs.append(1) or ascend(*a))
     assert main([*argv, "-o", str(out)]) == 0
@@ -117,7 +117,7 @@ def test_a_killed_run_resumes_from_its_finished_blocks(tmp_path, volume, capsys,
     # Ctrl-C in the edge pass, after 5 of its 27 blocks
     argv, expected, out = _whole_and_interrupted(tmp_path, volume, monkeypatch, "_pairs_of_block")
     work = out / ".vol.volseg-work"
-    done = {stage: len(list((work / stage).glob("*.npz")))
+    done = {stage: len(list((work / stage).glob("*.npys")))
             for stage in ("curvature", "cells", "forests")}
     assert done["cells"] == 27 and done["forests"] == 5 and done["curvature"] > 0
     assert not (work / "ends").exists()        # the ascent's ends: gone once cells are stored

@@ -60,6 +60,35 @@ def test_stored_blocks_read_back_as_the_array_they_were(tmp_path):
     assert not work.folder.exists()
 
 
+def test_blocks_read_back_exactly_whatever_their_arrays(tmp_path):
+    """A block's arrays come back from its file with their dtypes, shapes, memory
+    order and values: 0-d and empty arrays, booleans, a Fortran-ordered array, a
+    tuple of one array (not the array), a single array (not a tuple)."""
+    from volseg.blockwise import _resume
+
+    rng = np.random.default_rng(3)
+    fortran = np.asfortranarray(rng.standard_normal((3, 4, 5)).astype(np.float32))
+    results = {(0, 0, 0): (np.int64(7), np.zeros((0, 3), dtype=np.int32), rng.random(6) > 0.5,
+                           fortran, np.array([-np.inf, np.inf, -0.0])),
+               (0, 0, 1): (np.arange(4, dtype=np.uint16),),
+               (0, 0, 2): fortran}
+    work = WorkFolder(tmp_path / "w", {"input": "abc"})
+    for block_id in results:
+        work.wrap("stage", lambda block_id=None: results[block_id])(block_id=block_id)
+    _resume._CHECKED.clear()                                  # read as another process
+    never = work.wrap("stage", lambda block_id=None: pytest.fail("computed again"))
+    for block_id, result in results.items():
+        got = never(block_id=block_id)
+        assert isinstance(got, tuple) == isinstance(result, tuple)
+        for a, b in zip(got if isinstance(got, tuple) else (got,),
+                        result if isinstance(result, tuple) else (result,), strict=True):
+            b = np.asarray(b)
+            assert a.dtype == b.dtype and a.shape == b.shape and np.array_equal(a, b)
+            assert np.array_equal(np.signbit(a), np.signbit(b)) if a.dtype.kind == "f" else True
+        assert never(block_id=block_id) is not None
+    assert np.load(tmp_path / "w" / "stage" / "0_0_2.npys").shape == (32,)   # the digest
+
+
 def test_a_block_not_in_the_folder_is_an_error_naming_it(tmp_path):
     import dask.array as da
 
@@ -69,7 +98,9 @@ def test_a_block_not_in_the_folder_is_an_error_naming_it(tmp_path):
         work.array("never", lazy.chunks, np.float64).compute()
 
 
-@pytest.mark.parametrize("torn", [b"", b"PK\x03\x04 torn", "truncated", "empty archive"])
+@pytest.mark.parametrize("torn", [b"", b"\x93NUMPY torn", "truncated", "cut in a header",
+                                  "trailing bytes", "no arrays", "one array short",
+                                  "an object array", "an old zip"])
 def test_a_torn_block_is_computed_again_not_fatal(tmp_path, torn):
     calls = []
 
@@ -79,12 +110,24 @@ def test_a_torn_block_is_computed_again_not_fatal(tmp_path, torn):
 
     work = WorkFolder(tmp_path / "w", {"input": "abc"})
     expected = work.wrap("stage", block)(np.arange(50), block_id=(0, 0, 0))
-    path = tmp_path / "w" / "stage" / "0_0_0.npz"
+    path = tmp_path / "w" / "stage" / "0_0_0.npys"
     whole = path.read_bytes()
-    if torn == "truncated":          # the zip's CRC or its directory no longer agree
-        torn = whole[: len(whole) // 2]
-    elif torn == "empty archive":
-        np.savez(path)
+    digest = np.load(path)
+    if torn == "truncated":          # the last array short of its bytes
+        torn = whole[:-9]
+    elif torn == "cut in a header":
+        torn = whole[:len(digest.tobytes()) + 140]
+    elif torn == "trailing bytes":
+        torn = whole + b"\0"
+    elif torn in ("no arrays", "one array short", "an object array", "an old zip"):
+        with open(path, "wb") as file:
+            if torn == "an old zip":             # what earlier versions wrote there
+                np.savez(file, item0=np.arange(50) * 2, item1=np.array(1225), _digest=digest)
+            else:
+                np.save(file, digest)
+                np.save(file, np.array([0 if torn == "no arrays" else 2]))
+                np.save(file, np.arange(50) * 2 if torn == "one array short"
+                        else np.array([None, 1], dtype=object), allow_pickle=True)
         torn = path.read_bytes()
     path.write_bytes(torn)           # what a power loss or a full disk leaves
     again = WorkFolder(tmp_path / "w", {"input": "abc"})
@@ -105,14 +148,17 @@ def test_a_planted_block_of_other_values_is_computed_again(tmp_path):
 
     work = WorkFolder(tmp_path / "w", {"input": "abc"})
     expected = work.wrap("stage", block)(np.arange(5), block_id=(0, 0, 0))
-    path = tmp_path / "w" / "stage" / "0_0_0.npz"
-    np.savez(path, array=np.full(5, 7))                    # valid npz, other values
+    path = tmp_path / "w" / "stage" / "0_0_0.npys"
+    digest = np.load(path)
+    with open(path, "wb") as file:                         # a valid block, other values
+        for array in (digest, np.array([-1]), np.full(5, 7)):
+            np.save(file, array)
     again = WorkFolder(tmp_path / "w", {"input": "abc"})
     assert np.array_equal(again.wrap("stage", block)(np.arange(5), block_id=(0, 0, 0)),
                           expected)
     assert len(calls) == 2
     # A block saved for another place is not taken for this one.
-    moved = tmp_path / "w" / "stage" / "1_0_0.npz"
+    moved = tmp_path / "w" / "stage" / "1_0_0.npys"
     path.rename(moved)
     assert np.array_equal(again.wrap("stage", block)(np.arange(5) + 1, block_id=(1, 0, 0)),
                           (np.arange(5) + 1) * 2)
@@ -167,9 +213,9 @@ def test_a_block_is_digested_once_per_process_and_its_file(tmp_path, monkeypatch
     assert len(digests) == 2 and len(computed) == 1                   # checked once
     # The same file replaced by another block's (a copy: a new inode): checked again,
     # and refused, as its digest is of another place.
-    path = tmp_path / "w" / "stage" / "0_0_0.npz"
+    path = tmp_path / "w" / "stage" / "0_0_0.npys"
     other = block(np.arange(50) + 1, block_id=(1, 0, 0))
-    (tmp_path / "w" / "stage" / "1_0_0.npz").rename(path)
+    (tmp_path / "w" / "stage" / "1_0_0.npys").rename(path)
     assert np.array_equal(block(np.arange(50), block_id=(0, 0, 0)), expected)
     assert len(computed) == 3 and not np.array_equal(other, expected)
     work.remove()
