@@ -103,10 +103,8 @@ def _summary_of_block(halo, origin, shape, offsets, masked, ends_file=None):
     result, values = _ascend(halo, origin, shape, offsets, masked)
     if ends_file is not None:
         _atomic.write_atomically(ends_file, np.save, result)
-    a, b, c = result.shape
-    # Each row's first gid; a voxel's gid is its row's plus its place in the row.
-    rows = ((origin[0] + np.arange(a))[:, None] * shape[1] + origin[1] + np.arange(b)) \
-        * shape[2] + origin[2]
+    c = result.shape[2]
+    rows = _row_gids(origin, shape, result.shape)
     is_max = result == rows[:, :, None] + np.arange(c)    # a maximum's path ends at itself
     inner = values[1:-1, 1:-1, 1:-1]
     flat = result.reshape(-1)
@@ -117,6 +115,15 @@ def _summary_of_block(halo, origin, shape, offsets, masked, ends_file=None):
     low = np.min(inner, where=inner > -np.inf, initial=np.inf) if masked else inner.min()
     return (result[is_max], inner[is_max], rows.reshape(-1)[layer // c] + layer % c,
             flat[layer], np.array([low, high]))
+
+
+def _row_gids(origin, shape, block_shape) -> np.ndarray:
+    """(a, b): the gid (index in the whole volume of `shape`) of the first voxel of
+    each row of the (a, b, c) block at `origin`; a voxel's gid is its row's plus its
+    place in the row (what `_kernels._gid` computes voxel by voxel in the kernels)."""
+    a, b = block_shape[:2]
+    return ((origin[0] + np.arange(a))[:, None] * shape[1] + origin[1] + np.arange(b)) \
+        * shape[2] + origin[2]
 
 
 def _cells_of_block(halo, origin, shape, offsets, masked, keys, ids):
@@ -158,8 +165,9 @@ def _pairs_of_block(halo_values, halo_cells, origin, shape, offsets):
         cells = cells[1:]
         local -= 1
     strides = np.array([s // values.itemsize for s in values.strides], dtype=np.int64)
-    owned = np.arange(values.size).reshape(values.shape)[1:-1, 1:-1, 1:-1].ravel()
-    owned = owned[values.ravel()[owned] > -np.inf]         # the block's voxels in the mask
+    inside = np.zeros(values.shape, dtype=bool)             # the block's voxels in the mask
+    inside[1:-1, 1:-1, 1:-1] = values[1:-1, 1:-1, 1:-1] > -np.inf
+    owned = np.flatnonzero(inside)
     # 4-byte voxel ids below 2^31 voxels (up to 1290^3)
     gid_type = index_type(math.prod(shape))
     if not len(owned):
@@ -174,8 +182,9 @@ def _pairs_of_block(halo_values, halo_cells, origin, shape, offsets):
     a, b, saddle = _cross_edges(graph, local.ravel(), len(cells), one_sided=False)
     keep = spanning_forest(graph.values[saddle], saddle, a, b, len(cells))
     a, b, saddle = a[keep], b[keep], saddle[keep]
+    # A saddle is an edge's lower end: an owned voxel or one of the halo's.
     i, j, k = np.unravel_index(saddle, values.shape)
-    gids = ((origin[0] + i - 1) * shape[1] + origin[1] + j - 1) * shape[2] + origin[2] + k - 1
+    gids = _row_gids(origin - 1, shape, values.shape)[i, j] + k
     return (cells[a], cells[b], gids.astype(gid_type), graph.values[saddle], *faces)
 
 
