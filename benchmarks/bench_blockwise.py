@@ -6,7 +6,7 @@
                                          [--smooth SIGMA] [--repeat R] [--base REV]
                                          [--memory-limit BYTES] [--hierarchy-memory BYTES]
                                          [--threads-per-worker N] [--blocks EDGE]
-                                         [--measure persistence]
+                                         [--measure persistence] [--field gradient]
 
 For each size N it writes a synthetic smooth uint8 field of N^3 voxels straight to a
 Zarr store, block by block (the field is a sum of sinusoids of the global
@@ -24,7 +24,8 @@ alone (with ``local``, the workers are its children) and of its largest child (w
 ``local``, the busiest worker), the maxima and region
 counts, and whether the blockwise labels equal the in-memory ones. ``--smooth``
 passes ``--smooth SIGMA`` to every run (the 8-bit staircase of a slowly varying
-field makes a maximum of the curvature every 15 voxels or so at 1024^3).
+field makes a maximum of the curvature every 15 voxels or so at 1024^3); ``--field``
+and ``--measure`` pass theirs.
 
 ``--repeat R`` runs every case R times, interleaved (all cases once, then again), and
 reports each run and the fastest of each case: on a shared machine the same run can
@@ -163,6 +164,8 @@ def main(argv=None) -> int:
     parser.add_argument("--base", help="also run every case with this git revision's volseg")
     parser.add_argument("--measure", help="volseg segment --measure for every run (default: "
                         "volseg's; persistence: the cut in buckets, no hierarchy joined)")
+    parser.add_argument("--field", help="volseg segment --field for every run (default: "
+                        "volseg's, the curvature)")
     parser.add_argument("--memory-limit",
                         help="volseg segment --memory-limit for the blockwise runs (with "
                              "local: shared by its workers)")
@@ -195,8 +198,10 @@ def _main(args, trees) -> int:
         print(f"{n}^3: inputs ready in {time.perf_counter() - start:.1f} s", flush=True)
         volseg = [sys.executable, "-m", "volseg", "segment", "--regions", "30", "-q", "--force",
                   "--json", "--smooth", str(args.smooth),
-                  *(["--measure", args.measure] if args.measure else [])]
-        tag = f"_s{args.smooth:g}" if args.smooth else ""
+                  *(["--measure", args.measure] if args.measure else []),
+                  *(["--field", args.field] if args.field else [])]
+        tag = (f"_s{args.smooth:g}" if args.smooth else "") + (f"_{args.field}" if args.field
+                                                                 else "")
         plain = [("in memory", "-", folder / f"mem{n}{tag}",
                   [str(npy_path), "--mask", "none"])] if in_memory else []
         threads = args.threads_per_worker
@@ -266,7 +271,8 @@ def _main(args, trees) -> int:
         if base:
             print(f"{size}^3 {path}, workers {workers}: now/base = {seconds / base:.2f} "
                   f"({seconds:.1f} s / {base:.1f} s, fastest runs)", flush=True)
-    smoothed = f", smooth {args.smooth:g}" if args.smooth else ""
+    smoothed = (f", smooth {args.smooth:g}" if args.smooth else "") + (
+        f", {args.field}" if args.field else "")
     print("\n| size | path | workers | wall s (fastest; every run) | peak GB (all processes) "
           "| client GB | largest child GB | maxima | regions | same labels |")
     print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")

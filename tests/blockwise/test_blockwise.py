@@ -324,11 +324,13 @@ def test_the_stage_sequence_with_blockwise_storage_equals_in_memory(tmp_path, sm
     assert not storage.work.folder.exists()
 
 
-def test_the_stages_after_the_curvature_read_it_from_the_work_folder(tmp_path, small):
-    """The curvature's blocks, kept in the work folder as its kernel computed them,
-    are what the Morse stage, the cut and the writers read (uncompressed), not the
-    output's zstd chunks: with the output removed right after it is written, the
-    result is still the in-memory one."""
+@pytest.mark.parametrize("field", ["curvature", "gradient", "value"])
+def test_the_stages_after_the_field_read_it_from_the_work_folder(tmp_path, small, field):
+    """The field's blocks, kept in the work folder (the curvature's as its kernel
+    computed them, another field's before it is written), are what the Morse stage,
+    the cut and the writers read (uncompressed), not the output's zstd chunks: with
+    the output removed right after it is written, the result is still the in-memory
+    one."""
     import shutil
 
     from volseg.blockwise import BlockwiseStorage
@@ -342,7 +344,7 @@ def test_the_stages_after_the_curvature_read_it_from_the_work_folder(tmp_path, s
             return kept
 
     volume = np.round((small - small.min()) * 40).astype(np.uint8)
-    request = SegmentRequest.checked(n_regions=5, mask=None, smooth_sigma=0)
+    request = SegmentRequest.checked(n_regions=5, mask=None, smooth_sigma=0, field=field)
     eager, _ = run_stages(volume, request)
     lazy = da.from_array(volume, chunks=(7, 6, 5))
     paths = {kind: tmp_path / name for kind, name in output_names(
@@ -350,6 +352,7 @@ def test_the_stages_after_the_curvature_read_it_from_the_work_folder(tmp_path, s
     storage = Removing(lazy, request, paths, folder=tmp_path, stem="v", checksum="x",
                        frame=None)
     result, _ = run_stages(lazy, request, storage)
+    assert storage.work.finished("curvature") == lazy.npartitions
     assert np.array_equal(np.asarray(result.labels), eager.labels)
     assert np.array_equal(np.asarray(result.curvature), eager.curvature)
     storage.finish()

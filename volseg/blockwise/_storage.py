@@ -15,7 +15,8 @@ before from disk instead, inside the output set's staging folder:
 2. the curvature, block by block with its halo, written to ``<stem>_curvature.zarr``
    (float64, so that the Morse stage reads exactly what it would in memory), each
    block also kept in the work folder below, uncompressed: the later stages read it
-   from there (another field: from its output);
+   from there (another field, the gradient or the values: the same, each block kept
+   there first, then written from there);
 3. the Morse hierarchy from those blocks (two passes over them with their
    halos, the ascent's per-voxel path ends kept in the work folder until the cells
    are computed from them, once; the maxima's ids, the exits and the union-find on
@@ -118,10 +119,16 @@ class BlockwiseStorage(Storage):
             done = ", ".join(f"{stage} {self.work.finished(stage)}" for stage in
                              ("smoothed", "curvature", "ascent", "cells", "forests"))
             self.say(f"resuming from finished blocks in {self.work.folder} ({done})")
-        self.block_hooks = BlockHooks(wrap=self.work.wrap, compute=self._run,
+        self.kept = set()                   # the stages whose blocks a kernel keeps
+        self.block_hooks = BlockHooks(wrap=self._wrap, compute=self._run,
                                       persist=self._persist, store=self._store, reread=True,
                                       scratch=str(self.work.folder / "ends"),
                                       threads=self.engine.threads if self.engine else None)
+
+    def _wrap(self, stage: str, function):
+        """The work folder's `wrap`, noting that `stage`'s blocks are kept by it."""
+        self.kept.add(stage)
+        return self.work.wrap(stage, function)
 
     def _store(self, stage: str, blocks):
         """Blocks wrapped by ``work.wrap(stage, ...)``, computed once into the work
@@ -142,16 +149,17 @@ class BlockwiseStorage(Storage):
         return self._store("smoothed", values.map_blocks(self.work.wrap("smoothed", _same),
                                                          dtype=values.dtype))
 
-    def curvature(self, curvature):
-        self._write("curvature", curvature)
+    def curvature(self, field):
         # The Morse stage and the writers read the field again and again (each pass,
-        # each block's halo): the curvature's blocks, which its kernel kept in the work
-        # folder as it computed them, are read from there rather than decoded from the
-        # output's zstd chunks (a pass over a 512^3 curvature: 0.6 CPU-s against 1.4).
-        # Another field (not kept there) is read from its output.
-        if self.work.finished("curvature") == curvature.npartitions:
-            return self.work.array("curvature", curvature.chunks, curvature.dtype)
-        return read_zarr(self.paths["curvature"]).data
+        # each block's halo): from the work folder, uncompressed, rather than decoded
+        # from the output's zstd chunks (a pass over a 512^3 curvature: 0.6 CPU-s
+        # against 1.4). The curvature's kernel keeps its blocks there as it computes
+        # them; another field (gradient, value, given) is kept there first, then written.
+        if "curvature" not in self.kept:
+            field = self._store("curvature", field.map_blocks(
+                self.work.wrap("curvature", _same), dtype=field.dtype))
+        self._write("curvature", field)
+        return self.work.array("curvature", field.chunks, field.dtype)
 
     def labels(self, labels, n_regions: int):
         return self._written("labels", labels.astype(label_type(n_regions)))
