@@ -98,11 +98,11 @@ class _Cached:
                 return saved
         result = self.function(*blocks, block_id=block_id)
         single = isinstance(result, np.ndarray)
-        items = ({"array": result} if single
-                 else {f"item{i}": np.asarray(r) for i, r in enumerate(result)})
-        digest = np.frombuffer(_digest(f"{self.tag}/{name}", items), np.uint8)
-        write_atomically(path, _save, digest, -1 if single else len(items),
-                         list(items.values()), durable=True)
+        arrays = [result] if single else [np.asarray(r) for r in result]
+        digest = np.frombuffer(_digest(f"{self.tag}/{name}", _members(arrays, single)),
+                               np.uint8)
+        write_atomically(path, _save, digest, -1 if single else len(arrays), arrays,
+                         durable=True)
         _CHECKED[path] = _identity(path, f"{self.tag}/{name}")
         return result
 
@@ -120,6 +120,12 @@ def _save(file, digest, count: int, arrays) -> None:
     time, for a 128^3 block of 25 MB; the digest guards its contents."""
     for array in (digest, np.array([count], dtype=np.int64), *arrays):
         np.save(file, array, allow_pickle=False)
+
+
+def _members(arrays, single: bool) -> dict:
+    """A block's arrays by the names its digest covers: ``array`` for one array, else
+    ``item0``, ``item1``, ... for a tuple's."""
+    return {"array": arrays[0]} if single else {f"item{i}": a for i, a in enumerate(arrays)}
 
 
 def _digest(tag: str, items: dict) -> bytes:
@@ -182,8 +188,7 @@ def _load(path, tag: str = ""):
             arrays = [_read_array(file) for _ in range(1 if count == -1 else count)]
             if file.read(1):
                 raise ValueError("bytes after the last array")
-        members = ({"array": arrays[0]} if count == -1
-                   else {f"item{i}": a for i, a in enumerate(arrays)})
+        members = _members(arrays, count == -1)
         if not members:
             raise ValueError("no arrays")
         if _CHECKED.get(path) != identity:
