@@ -12,6 +12,7 @@ import zarr
 
 from volseg.cli import main
 from volseg.io import Frame, VolumeFileError, read_volume, write_zarr
+from volseg.io.zarr_store import ZSTD_LEVEL
 
 from ..conftest import smooth_random_field
 
@@ -117,6 +118,14 @@ def test_cli_zarr_in_zarr_out_equals_in_memory(tmp_path, volume, capsys):
     assert curvature.dtype == np.float64       # what the Morse stage read, exactly
     nifti = nibabel.load(tmp_path / "m" / "vol_curvature.nii.gz")
     assert np.array_equal(curvature.astype(np.float32), np.asanyarray(nifti.dataobj))
+    # Every array either path wrote (plain Zarr, both OME-Zarr writers) has volseg's one
+    # zstd level, not Zarr's default.
+    metadata = [json.loads(f.read_text()) for d in ("z", "m")
+                for f in sorted((tmp_path / d).rglob("zarr.json"))]
+    codecs = [m["codecs"] for m in metadata if m["node_type"] == "array"]
+    assert len(codecs) >= 6
+    assert all(c[-1] == {"name": "zstd", "configuration": {"level": ZSTD_LEVEL,
+                                                           "checksum": False}} for c in codecs)
     a = json.loads((tmp_path / "z" / "vol_summary.json").read_text())
     b = json.loads((tmp_path / "m" / "vol_summary.json").read_text())
     assert a["regions"] == b["regions"] and a["n_maxima"] == b["n_maxima"]

@@ -26,6 +26,7 @@ import numpy as np
 
 from ..errors import OutputError, VolumeFileError
 from .volume import Frame
+from .zarr_store import compressors
 
 __all__ = ["write_ngff", "write_labels_into", "recover_labels", "is_ome_image", "ome_levels",
            "pyramid_levels", "NGFF_CHUNK"]
@@ -110,17 +111,15 @@ def _written_levels(levels, group, axes) -> list:
     """Lazy writes of `levels` (Dask) as `group`'s arrays s0, s1, ... in `NGFF_CHUNK`
     chunks, each task a block of chunks (`_in_write_blocks`). Through ome-zarr-py's own
     writer each chunk of 64^3 was a task of its own, with the rechunks before it: 41 567
-    tasks for a 1024^3 result's image, most of the run's tasks on a cluster."""
+    tasks for a 1024^3 result's image, most of the run's tasks on a cluster. The arrays
+    are made here (`_array`), as the in-memory writer makes them, and Dask stores into
+    them: the codecs are set in one place whatever Dask's version passes on to Zarr."""
     import dask.array as da
 
-    writes = []
-    for i, level in enumerate(levels):
-        component = f"{group.path}/s{i}" if group.path else f"s{i}"
-        writes.append(da.to_zarr(
-            _in_write_blocks(level), url=group.store, component=component, compute=False,
-            zarr_format=3, chunks=_chunks(level.shape),
-            dimension_names=[a["name"] for a in axes], **STORAGE))
-    return writes
+    return [da.store(_in_write_blocks(level),
+                     _array(group, f"s{i}", axes, shape=level.shape, dtype=level.dtype),
+                     lock=False, compute=False)
+            for i, level in enumerate(levels)]
 
 
 def _chunks(shape) -> tuple:
@@ -133,7 +132,7 @@ def _array(group, name, axes, data=None, *, shape=None, dtype=None):
     spec = {"data": data} if data is not None else {"shape": shape, "dtype": dtype}
     return group.create_array(name, chunks=_chunks(spec.get("shape", np.shape(data))),
                               dimension_names=[a["name"] for a in axes],
-                              config=STORAGE["config"], **spec)
+                              compressors=compressors(), config=STORAGE["config"], **spec)
 
 
 def _level0_in_slabs(group, array, dtype, axes, below):

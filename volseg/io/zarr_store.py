@@ -22,7 +22,22 @@ import numpy as np
 from ..errors import MissingChunksError
 from .volume import METRES, Frame, Volume, VolumeFileError, length_unit
 
-__all__ = ["read_zarr", "write_zarr", "is_zarr"]
+__all__ = ["read_zarr", "write_zarr", "is_zarr", "compressors", "ZSTD_LEVEL"]
+
+#: The zstd level of every Zarr v3 array volseg writes (plain Zarr and OME-Zarr).
+#: Zarr's default, 3, compressed a 512^3 blockwise run's float curvature at 170 MB/s:
+#: 17 of the run's 170 CPU-s. Level 1 runs at 350-960 MB/s; its files are as small on a
+#: real volume's curvature (tooth, float32: 93 % of the bytes at either level) and up to
+#: 30 % larger on an 8-bit staircase's (87 % against 67 %). zstd, not blosc: a chunk cut
+#: short fails to decode instead of reading as garbage (`_check_blosc_lengths`).
+ZSTD_LEVEL = 1
+
+
+def compressors() -> tuple:
+    """The codecs after the bytes of every array volseg writes (`ZSTD_LEVEL`)."""
+    from zarr.codecs import ZstdCodec
+
+    return (ZstdCodec(level=ZSTD_LEVEL),)
 
 
 def is_zarr(path) -> bool:
@@ -428,7 +443,7 @@ def write_zarr(path, data, *, frame: Frame | None = None, chunks=None, compute=N
     frame = frame or Frame.from_spacing((1.0, 1.0, 1.0))
     store = zarr.create_array(str(path), shape=lazy.shape, chunks=tuple(c[0] for c in lazy.chunks),
                               dtype=lazy.dtype, fill_value=0, overwrite=True,
-                              config={"write_empty_chunks": True})
+                              compressors=compressors(), config={"write_empty_chunks": True})
     store.attrs["volseg"] = {"axes": "xyz", "spacing": list(frame.spacing),
                              "affine": np.asarray(frame.affine).tolist()}
     if compute is None:
