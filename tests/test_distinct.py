@@ -4,7 +4,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from volseg._distinct import distinct, index_type, is_in, places
+from volseg._distinct import distinct, index_type, is_in, places, positions
 
 
 @given(arrays(st.sampled_from([np.int32, np.int64, np.uint8]), st.integers(0, 3).map(
@@ -47,6 +47,31 @@ def test_places_grows_its_table_past_a_thousand_ids_far_apart():
 def test_places_refuses_floats():
     with pytest.raises(TypeError, match="integers"):
         places(np.array([1.0, 2.0]))
+
+
+@settings(deadline=None)
+@given(st.lists(st.integers(-2**40, 2**40), unique=True, max_size=40).map(np.array),
+       st.sampled_from([np.int32, np.int64]), st.data())
+def test_positions_is_searchsorted_on_present_queries_and_minus_one_elsewhere(values, dtype,
+                                                                           data):
+    values = np.sort(values).astype(np.int64)
+    present = data.draw(st.lists(st.sampled_from(values.tolist()), max_size=30)
+                        if len(values) else st.just([]))
+    absent = data.draw(st.lists(st.integers(-2**31, 2**31 - 1).filter(
+        lambda q: q not in set(values.tolist())), max_size=5))
+    queries = np.array(present + absent, dtype=np.int64)
+    queries = queries[np.abs(queries) < 2**31].astype(dtype)      # what `dtype` holds
+    out = positions(values, queries)
+    expected = np.where(np.isin(queries, values), np.searchsorted(values, queries), -1)
+    assert out.dtype == np.int64 and out.shape == queries.shape
+    np.testing.assert_array_equal(out, expected)
+
+
+def test_positions_numbers_unsorted_values_by_their_index_past_a_grown_table():
+    rng = np.random.default_rng(5)
+    values = rng.permutation(rng.choice(2**50, size=100_000, replace=False))
+    at = rng.integers(0, len(values), size=(300, 7))
+    np.testing.assert_array_equal(positions(values, values[at]), at)
 
 
 @given(arrays(np.int64, st.integers(0, 12), elements=st.integers(-4, 6)),

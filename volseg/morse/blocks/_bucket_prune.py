@@ -37,7 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..._distinct import distinct
+from ..._distinct import distinct, positions
 from ..._sizes import SizedByArrays
 from ..._task_graph import TaskGraph
 from .. import _measures, _prune_groups
@@ -176,7 +176,7 @@ def _leaf_pieces(bucket, placed: tuple, asked: list, replies: list, n_leaves: in
     known_sum = np.concatenate([r[1] for r in replies])
     dies = np.flatnonzero(bucket.dies)
     s, t = bucket.source[dies], bucket.target[dies]
-    at_s, at_t = np.searchsorted(known, s), np.searchsorted(known, t)
+    at_s, at_t = positions(known, s), positions(known, t)
     ls, lt = known_leaf[at_s], known_leaf[at_t]
     other = lt != ls
     both = np.concatenate([np.arange(len(dies)), np.flatnonzero(other)])
@@ -230,18 +230,17 @@ def _pruned_node(low, high) -> tuple:
 
 
 def _known_keys(decided: tuple, known: tuple) -> tuple:
-    """(events increasing, their extinctions, their pruned ids) of a group: what it
-    decided and what the group above sent it for the events it passed up."""
-    event, ext, tie = (np.concatenate([decided[k], known[k]]) for k in range(3))
-    order = np.argsort(event, kind="stable")
-    return event[order], ext[order], tie[order]
+    """(events, their extinctions, their pruned ids) of a group, each event once, in no
+    order (`_looked_up` finds them by a hash table): what it decided and what the group
+    above sent it for the events it passed up."""
+    return tuple(np.concatenate([decided[k], known[k]]) for k in range(3))
 
 
 def _looked_up(keys: tuple, events) -> tuple:
     """The keys of `events`, every one of which `keys` must hold."""
     event, ext, tie = keys
-    at = np.searchsorted(event, events)
-    if len(at) and (at.max() >= len(event) or not np.array_equal(event[at], events)):
+    at = positions(event, events)
+    if len(at) and at.min() < 0:
         raise RuntimeError("the pruning's tree lost the key of an event")
     return ext[at], tie[at]
 

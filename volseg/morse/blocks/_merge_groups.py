@@ -25,7 +25,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from ..._distinct import distinct
+from ..._distinct import distinct, positions
 from ..._union_find import find_root
 from .._prune_groups import GroupState
 
@@ -90,8 +90,8 @@ def decided(group: GroupState) -> tuple:
     """(the merges it decides, as (larger id, smaller id, extinction, pruned id); the
     `GroupState` it passes up: its undecided edges, ends named by the decided unions)."""
     rid = group.rid.astype(np.int64)
-    u = np.searchsorted(rid, group.a)
-    v = np.where(group.b >= 0, np.searchsorted(rid, np.maximum(group.b, 0)), -1)
+    u = positions(rid, group.a)
+    v = positions(rid, group.b)            # -1 where b is -1 (outside): no id is < 0
     ext, tie = -group.sweep[0], group.sweep[1]
     done, gone, keep, root = decide(u, v, ext, tie, len(rid))
     rest = ~done
