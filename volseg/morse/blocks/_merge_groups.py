@@ -90,8 +90,8 @@ def decided(group: GroupState) -> tuple:
     """(the merges it decides, as (larger id, smaller id, extinction, pruned id); the
     `GroupState` it passes up: its undecided edges, ends named by the decided unions)."""
     rid = group.rid.astype(np.int64)
-    u = positions(rid, group.a)
-    v = positions(rid, group.b)            # -1 where b is -1 (outside): no id is < 0
+    # One table for both ends; v is -1 where b is -1 (outside): no id is < 0.
+    u, v = np.split(positions(rid, np.concatenate([group.a, group.b])), [len(group.a)])
     ext, tie = -group.sweep[0], group.sweep[1]
     done, gone, keep, root = decide(u, v, ext, tie, len(rid))
     rest = ~done
