@@ -26,7 +26,7 @@ import numpy as np
 
 from ..errors import OutputError, VolumeFileError
 from .volume import Frame
-from .zarr_store import compressors
+from .zarr_store import ARRAY_CONFIG, compressors
 
 __all__ = ["write_ngff", "write_labels_into", "recover_labels", "is_ome_image", "ome_levels",
            "pyramid_levels", "NGFF_CHUNK"]
@@ -36,10 +36,8 @@ NGFF_CHUNK = 64
 #: Edge of a numpy input's write blocks: each task writes 4^3 chunks (a Dask input's
 #: blocks are kept, rounded up to whole chunks).
 WRITE_BLOCK = 4 * NGFF_CHUNK
-#: Every chunk is written, all-zero ones too: Zarr skips chunks of the fill value by
-#: default, and volseg's reader refuses a store with missing chunks (one that was never
-#: written whole reads as zeros), so it would refuse its own output's background.
-STORAGE = {"config": {"write_empty_chunks": True}}
+#: ome-zarr-py's storage options for the labels written into an input (`ARRAY_CONFIG`).
+STORAGE = {"config": ARRAY_CONFIG}
 #: Levels are added until the smallest axis is at most this many voxels.
 SMALLEST_LEVEL = 64
 
@@ -132,7 +130,7 @@ def _array(group, name, axes, data=None, *, shape=None, dtype=None):
     spec = {"data": data} if data is not None else {"shape": shape, "dtype": dtype}
     return group.create_array(name, chunks=_chunks(spec.get("shape", np.shape(data))),
                               dimension_names=[a["name"] for a in axes],
-                              compressors=compressors(), config=STORAGE["config"], **spec)
+                              compressors=compressors(), config=ARRAY_CONFIG, **spec)
 
 
 def _level0_in_slabs(group, array, dtype, axes, below):

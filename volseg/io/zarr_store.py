@@ -22,7 +22,7 @@ import numpy as np
 from ..errors import MissingChunksError
 from .volume import METRES, Frame, Volume, VolumeFileError, length_unit
 
-__all__ = ["read_zarr", "write_zarr", "is_zarr", "compressors", "ZSTD_LEVEL"]
+__all__ = ["read_zarr", "write_zarr", "is_zarr", "compressors", "ZSTD_LEVEL", "ARRAY_CONFIG"]
 
 #: The zstd level of every Zarr v3 array volseg writes (plain Zarr and OME-Zarr).
 #: Zarr's default, 3, compressed a 512^3 blockwise run's float curvature at 170 MB/s:
@@ -32,6 +32,11 @@ __all__ = ["read_zarr", "write_zarr", "is_zarr", "compressors", "ZSTD_LEVEL"]
 #: against 67 %; 1024^3: the curvature store 3.6 GB against 2.2). zstd, not blosc: a
 #: chunk cut short fails to decode instead of reading as garbage (`_check_blosc_lengths`).
 ZSTD_LEVEL = 1
+#: Every chunk of every array volseg writes is written, all-zero ones too: Zarr skips
+#: chunks of the fill value by default, and volseg's reader refuses a store with missing
+#: chunks (one that was never written whole reads as zeros), so it would refuse its own
+#: output's background.
+ARRAY_CONFIG = {"write_empty_chunks": True}
 
 
 def compressors() -> tuple:
@@ -444,7 +449,7 @@ def write_zarr(path, data, *, frame: Frame | None = None, chunks=None, compute=N
     frame = frame or Frame.from_spacing((1.0, 1.0, 1.0))
     store = zarr.create_array(str(path), shape=lazy.shape, chunks=tuple(c[0] for c in lazy.chunks),
                               dtype=lazy.dtype, fill_value=0, overwrite=True,
-                              compressors=compressors(), config={"write_empty_chunks": True})
+                              compressors=compressors(), config=ARRAY_CONFIG)
     store.attrs["volseg"] = {"axes": "xyz", "spacing": list(frame.spacing),
                              "affine": np.asarray(frame.affine).tolist()}
     if compute is None:
