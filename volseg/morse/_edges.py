@@ -29,8 +29,8 @@ def _cross_edges(graph, cell, n_cells, *, cells_mark_vertices=False, one_sided=N
     The vertices are grouped by cell (a counting sort), then each cell's edges to
     cells with a larger id are reduced to one per partner: exactly one edge per pair,
     which is all the elder-rule union-find needs (a lower edge of a pair can never
-    join two components). Cells are walked in the order of their first vertex (so
-    the walk moves through memory), in chunks of about `_CHUNK_VERTICES` vertices run
+    join two components). Cells are walked tile by tile (`_visit_order`: the
+    vertices reached stay in cache), in chunks of about `_CHUNK_VERTICES` vertices run
     in parallel; each chunk gets room for 10 pairs per cell plus one per 16 vertices
     (quantized fields need about 8 per cell), and the chunks that overflow are rerun
     with exact room. The grouping is freed before the pieces are joined, so the peak
@@ -61,9 +61,8 @@ def _cross_edges(graph, cell, n_cells, *, cells_mark_vertices=False, one_sided=N
     else:
         _kernels.group_by_cell(vertices, cell, n_cells, starts, members)
     del vertices
-    # Cells in the order of their first vertex, so that the walk moves through memory.
     # (A cell may have no vertex: the blockwise pass's cells seen only in a block's halo.)
-    visit = np.argsort(members[np.minimum(starts[:-1], n_real - 1)], kind="stable").astype(np.int64)
+    visit = _visit_order(members[np.minimum(starts[:-1], n_real - 1)], graph)
     counts_in_order = np.diff(starts)[visit]
     n_chunks = max(1, min(256, -(-n_real // _CHUNK_VERTICES)))
     bounds = np.searchsorted(np.cumsum(counts_in_order),
@@ -108,6 +107,29 @@ def _cross_edges(graph, cell, n_cells, *, cells_mark_vertices=False, one_sided=N
         del room
     keep = _kernels.two_sided(a, b, v, flat, n_cells)
     return a[keep], b[keep], v[keep]
+
+
+#: A grid's cells are walked tile by tile: cubes of this many nodes a side.
+_TILE = 32
+
+
+def _visit_order(first, graph):
+    """The order the pass walks the cells in, given each cell's first vertex: on a
+    grid by the `_TILE`-cube of the padded grid that vertex lies in, then by the
+    vertex; on a graph by the vertex. The vertices of a tile's cells and their
+    neighbours (about (32 + 8)^3 nodes, 0.8 MB of values and cells) then stay in a
+    core's L2 cache while its cells are walked; in plain node order the cells being
+    walked spanned whole planes, 6 MB at 256^3. Pairs pass 1.4x faster at 256^3
+    (389 020 cells: 0.68-0.90 s against 1.00-1.18; smooth field, 11 794 cells:
+    0.26-0.33 s against 0.37-0.42), the same pairs (their order is not the result's:
+    `_saddle_order` sorts by value, vertex and pair)."""
+    first = first.astype(np.int64)
+    if not graph.grid:
+        return np.argsort(first, kind="stable")
+    coords = np.unravel_index(first, graph.padded_shape)
+    tiles = tuple(-(-n // _TILE) for n in graph.padded_shape)
+    tile = np.ravel_multi_index(tuple(c // _TILE for c in coords), tiles).astype(np.int64)
+    return np.argsort(tile * len(graph.values) + first, kind="stable")
 
 
 def _per_chunk(ufunc, values, bounds):
