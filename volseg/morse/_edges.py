@@ -116,13 +116,15 @@ _TILE = 32
 def _visit_order(first, graph):
     """The order the pass walks the cells in, given each cell's first vertex: on a
     grid by the `_TILE`-cube of the padded grid that vertex lies in, then by the
-    vertex; on a graph by the vertex. The vertices of a tile's cells and their
-    neighbours (about (32 + 8)^3 nodes, 0.8 MB of values and cells) then stay in a
-    core's L2 cache while its cells are walked; in plain node order the cells being
-    walked spanned whole planes, 6 MB at 256^3. Pairs pass 1.4x faster at 256^3
-    (389 020 cells: 0.68-0.90 s against 1.00-1.18; smooth field, 11 794 cells:
-    0.26-0.33 s against 0.37-0.42), the same pairs (their order is not the result's:
-    `_saddle_order` sorts by value, vertex and pair)."""
+    vertex; on a graph by the vertex. The pass is bound by reaching each cell's
+    vertices and their neighbours in memory: by tile, what a chunk is walking at once
+    is about (32 + 8)^3 nodes (0.8 MB of values and cells, within a core's 2 MB L2),
+    where in node order it spanned whole planes (several MB at 256^3; an estimate, not
+    counted). Pairs pass 1.4x faster at 256^3 (389 020 cells: 0.71-0.77 s against
+    1.01-1.18; smooth field, 11 794 cells: 0.26-0.33 s against 0.37-0.42; tiles of 16
+    and 64 about the same), the same pairs: their order is not the result's,
+    `_saddle_order` sorts by value, vertex and pair. A 128^3 block of the blockwise
+    build gained nothing measurable (512^3 end to end: 99.1 s against 97.6)."""
     first = first.astype(np.int64)
     if not graph.grid:
         return np.argsort(first, kind="stable")
