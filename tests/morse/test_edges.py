@@ -46,6 +46,33 @@ def test_the_filter_runs_and_drops_edges_on_a_dense_graph():
     assert keep.sum() == 30 - nx.number_connected_components(graph)
 
 
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 40), st.integers(0, 600), st.integers(1, 6))
+def test_the_ordered_forest_is_the_forest_in_the_saddle_order(seed, n_cells, n_edges,
+                                                               n_values):
+    """`ordered=True` gives the kept edges in the `_saddle_order` without sorting them
+    again, with few edges (one sort) and with many (the filter's two batches), on
+    plateaus and shared saddles."""
+    keys, saddle, a, b = _graph(seed, n_cells, n_edges, n_values)
+    keep = spanning_forest(keys, saddle, a, b, n_cells)
+    ordered = spanning_forest(keys, saddle, a, b, n_cells, ordered=True)
+    expected = _saddle_order(keys, saddle, a, b, np.flatnonzero(keep))
+    assert ordered.tolist() == expected.tolist()
+
+
+def test_the_ordered_forest_takes_both_batches():
+    """A dense graph where cell 0 hangs on its lowest edges: the filter's low batch
+    keeps edges too, and they come first."""
+    keys, saddle, a, b = _graph(11, 30, 900, 50)
+    keys[(a == 0) | (b == 0)] = -1.0
+    assert len(keys) > _FIRST_EDGES_PER_CELL * 30
+    keep = spanning_forest(keys, saddle, a, b, 30)
+    ordered = spanning_forest(keys, saddle, a, b, 30, ordered=True)
+    pivot = np.partition(keys, len(keys) - 90)[len(keys) - 90]
+    assert (keys[ordered] <= pivot).any() and (keys[ordered] > pivot).any()
+    assert ordered.tolist() == _saddle_order(keys, saddle, a, b, np.flatnonzero(keep)).tolist()
+
+
 def test_no_edges_no_forest():
     empty = np.zeros(0, dtype=np.int64)
     assert spanning_forest(np.zeros(0), empty, empty, empty, 3).tolist() == []

@@ -13,7 +13,7 @@ from numpy.typing import ArrayLike, NDArray
 from .._buffers import room_to_pad
 from .._distinct import index_type
 from . import _kernels as kernels
-from ._edges import _cross_edges, _saddle_order, spanning_forest
+from ._edges import _cross_edges, spanning_forest
 from ._graph import PaddedInPlace, _Neighbourhood, _neighbourhood, _validate_field
 from ._hierarchy import MorseHierarchy
 from ._phases import _Phases
@@ -67,9 +67,8 @@ def _merge_events(graph: _Neighbourhood, cell, n_maxima,
     phases.done("cross-cell edges")
     # Only the cell graph's maximum spanning forest can merge two components.
     keys = graph.values[edge_v]
-    forest = np.flatnonzero(spanning_forest(keys, edge_v, edge_a, edge_b, n_maxima))
-    order = _saddle_order(keys, edge_v, edge_a, edge_b, forest)
-    del keys, forest
+    order = spanning_forest(keys, edge_v, edge_a, edge_b, n_maxima, ordered=True)
+    del keys
     phases.done("saddle order (spanning forest, sort, ties)")
     sorted_edges = [np.empty(len(order), dtype=e.dtype) for e in (edge_a, edge_b, edge_v)]
     kernels.gather(order, edge_a, edge_b, edge_v, *sorted_edges)

@@ -181,29 +181,33 @@ def _saddle_order(keys, saddle, edge_a, edge_b, edges=None):
 _FIRST_EDGES_PER_CELL = 3
 
 
-def spanning_forest(keys, saddle, edge_a, edge_b, n_cells):
+def spanning_forest(keys, saddle, edge_a, edge_b, n_cells, *, ordered=False):
     """keep[e]: whether edge e is in the maximum spanning forest of cells
-    0..n_cells-1 in the `_saddle_order` (Kruskal from the highest edge down).
+    0..n_cells-1 in the `_saddle_order` (Kruskal from the highest edge down). With
+    `ordered`: the forest's edges (indices) in the `_saddle_order` instead, which is
+    the order Kruskal met them in (no second sort: 0.05 s of the build at 256^3).
 
     A filter-Kruskal: the highest 3 x n_cells edges are sorted and taken first; of
     the rest, only the edges between two components still apart are sorted and taken
     after them (an edge inside a component is refused whenever it comes: components
     only grow). The same forest as one sort of every edge, 1.7x faster on a 128^3
     block of a quantized field (7 edges per cell; 40 000 of 650 000 lower edges
-    survive the filter).
+    survive the filter). Every low edge's key is at most the pivot and every high
+    one's above it, so the low batch's forest edges, then the high batch's, each in
+    its own sorted order, are the forest in the `_saddle_order`.
     """
     keep = np.zeros(len(edge_a), dtype=bool)
     parent = np.arange(n_cells, dtype=np.int64)
     first = _FIRST_EDGES_PER_CELL * n_cells
     if first >= len(keys):                  # few edges: one sort
-        _kernels.spanning_edges(edge_a, edge_b, _saddle_order(keys, saddle, edge_a, edge_b),
-                                parent, keep)
-        return keep
+        order = _saddle_order(keys, saddle, edge_a, edge_b)
+        _kernels.spanning_edges(edge_a, edge_b, order, parent, keep)
+        return order[keep[order]] if ordered else keep
     pivot = np.partition(keys, len(keys) - first)[len(keys) - first]
-    high = np.flatnonzero(keys > pivot)
-    _kernels.spanning_edges(edge_a, edge_b, _saddle_order(keys, saddle, edge_a, edge_b, high),
-                            parent, keep)
+    high = _saddle_order(keys, saddle, edge_a, edge_b, np.flatnonzero(keys > pivot))
+    _kernels.spanning_edges(edge_a, edge_b, high, parent, keep)
+    high = high[keep[high]]                 # the forest's high edges, in order
     low = _kernels.apart(edge_a, edge_b, np.flatnonzero(keys <= pivot), parent)
-    _kernels.spanning_edges(edge_a, edge_b, _saddle_order(keys, saddle, edge_a, edge_b, low),
-                            parent, keep)
-    return keep
+    low = _saddle_order(keys, saddle, edge_a, edge_b, low)
+    _kernels.spanning_edges(edge_a, edge_b, low, parent, keep)
+    return np.concatenate([low[keep[low]], high]) if ordered else keep
