@@ -206,8 +206,7 @@ def spanning_forest(keys, saddle, edge_a, edge_b, n_cells, *, ordered=False):
     pivot = np.partition(keys, len(keys) - first)[len(keys) - first]
     high = _saddle_order(keys, saddle, edge_a, edge_b, np.flatnonzero(keys > pivot))
     _kernels.spanning_edges(edge_a, edge_b, high, parent, keep)
-    high = high[keep[high]]                 # the forest's high edges, in order
     low = _kernels.apart(edge_a, edge_b, np.flatnonzero(keys <= pivot), parent)
     low = _saddle_order(keys, saddle, edge_a, edge_b, low)
     _kernels.spanning_edges(edge_a, edge_b, low, parent, keep)
-    return np.concatenate([low[keep[low]], high]) if ordered else keep
+    return np.concatenate([low[keep[low]], high[keep[high]]]) if ordered else keep
