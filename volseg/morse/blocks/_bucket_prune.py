@@ -176,8 +176,7 @@ def _leaf_pieces(bucket, placed: tuple, asked: list, replies: list, n_leaves: in
     known_sum = np.concatenate([r[1] for r in replies])
     dies = np.flatnonzero(bucket.dies)
     s, t = bucket.source[dies], bucket.target[dies]
-    at = positions(known, np.concatenate([s, t]))           # one table for both ends
-    at_s, at_t = at[:len(s)], at[len(s):]
+    at_s, at_t = positions(known, np.stack([s, t]))         # one table for both ends
     ls, lt = known_leaf[at_s], known_leaf[at_t]
     other = lt != ls
     both = np.concatenate([np.arange(len(dies)), np.flatnonzero(other)])

@@ -91,7 +91,7 @@ def decided(group: GroupState) -> tuple:
     `GroupState` it passes up: its undecided edges, ends named by the decided unions)."""
     rid = group.rid.astype(np.int64)
     # One table for both ends; v is -1 where b is -1 (outside): no id is < 0.
-    u, v = np.split(positions(rid, np.concatenate([group.a, group.b])), [len(group.a)])
+    u, v = positions(rid, np.stack([group.a, group.b]))
     ext, tie = -group.sweep[0], group.sweep[1]
     done, gone, keep, root = decide(u, v, ext, tie, len(rid))
     rest = ~done
