@@ -7,12 +7,13 @@
 The field is `bench_kernels.py`'s: the weighted curvature of an 8-bit smoothed random
 volume (389,020 maxima at 256^3), or with `--field smooth` that smoothed volume itself
 before quantizing (11,599 maxima at 256^3: few large cells, like TTK's anchor field and
-a gradient's basins), made once and read from .npy by both sides. Each
-round runs the base revision (a temporary git worktree) and today's code in two fresh
-interpreters, one after the other, each timing two builds after a warm-up (compiled
-kernels load from numba's cache; nothing is compiled in the timed calls). The machine
-is shared and its speed drifts by 30 % within minutes, so only the rounds' paired
-ratios and the medians of wall and CPU time are reported, never one run's time.
+a gradient's basins), made once and read from .npy by both sides. Each round runs the
+base revision (a temporary git worktree) and today's code in two fresh interpreters,
+one after the other (which goes first alternates from round to round), each timing two
+builds after a warm-up (compiled kernels load from numba's cache; nothing is compiled
+in the timed calls). The machine is shared and its speed drifts by 30 % within
+minutes, so only the rounds' paired ratios and the medians of wall and CPU time are
+reported, never one run's time.
 """
 
 import argparse
@@ -70,8 +71,11 @@ def main():
         run(FIELD, tree=str(ROOT), n=args.size, path=path, smooth=args.field == "smooth")
         old, new = [], []
         for k in range(args.rounds):
-            old.append(run(BUILD, tree=str(base), path=path))
-            new.append(run(BUILD, tree=str(ROOT), path=path))
+            # Which side runs first alternates: a run right after another (or after a
+            # pause) can be systematically faster or slower.
+            pair = [(old, str(base)), (new, str(ROOT))]
+            for results, tree in pair[::-1] if k % 2 else pair:
+                results.append(run(BUILD, tree=tree, path=path))
             assert (old[-1]["maxima"], old[-1]["events"]) == (new[-1]["maxima"], new[-1]["events"])
             print(f"round {k + 1}: base {old[-1]['wall']:.2f} s ({old[-1]['cpu']:.2f} CPU-s), "
                   f"now {new[-1]['wall']:.2f} s ({new[-1]['cpu']:.2f} CPU-s): "
