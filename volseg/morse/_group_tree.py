@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._distinct import distinct, is_in
+from .._distinct import is_in, places
 from .._sizes import SizedByArrays
 from . import _group_kernels as kernels
 from . import _kernels
@@ -103,8 +103,10 @@ def decide(items: _Items, faces: tuple, group_id: int):
     `group_id`: the group's place in `block_tree` (what a report of the tree names)."""
     order = _saddle_order(items.value, items.saddle, items.a, items.b)
     items = items.taken(order)
-    nodes = distinct(np.concatenate([items.x, items.y]))
-    x, y = np.searchsorted(nodes, items.x), np.searchsorted(nodes, items.y)
+    # The distinct nodes and each end's place among them, by a hash table (`places`:
+    # no binary search per end).
+    nodes, ends = places(np.concatenate([items.x, items.y]))
+    x, y = ends[:len(items.x)], ends[len(items.x):]
     node_open = is_in(nodes, np.concatenate(faces))
     n = len(items.a)
     ev_item, up_item = np.empty(n, np.int64), np.empty(n, np.int64)

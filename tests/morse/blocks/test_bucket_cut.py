@@ -11,6 +11,7 @@ import pytest
 
 from volseg import descending_complex
 from volseg.morse import _kernels, cut_of
+from volseg.morse._prune_groups import GroupState
 from volseg.morse.blocks import _bucket_cut, _bucket_prune, _buckets
 from volseg.morse.blocks._cut import in_buckets
 from volseg.segment import CutRequest
@@ -143,6 +144,25 @@ def _kernels_root(parent, x):
     while parent[x] != x:
         x = parent[x]
     return x
+
+
+def test_a_groups_edge_ends_by_hash_are_those_of_a_binary_search():
+    """`_with_local` places each edge's ends among the group's regions by a hash
+    table: the places `GroupState.pruned` finds by binary search without it, -1 for an
+    end outside the group, ids far apart and none."""
+    rng = np.random.default_rng(17)
+    for n in (0, 1, 7, 1000):
+        rid = np.unique(rng.integers(0, 10**12, n))
+        m = 3 * len(rid)
+        a = rng.choice(rid, m) if len(rid) else np.zeros(0, np.int64)
+        b = np.where(rng.random(m) < 0.3, -1, rng.choice(rid, m) if len(rid) else -1)
+        state = GroupState(rid, np.zeros(len(rid), np.int64), np.arange(m), a, b,
+                           np.zeros(m, np.int64), np.full(m, -1))
+        u, v = _bucket_prune._with_local(state).local
+        assert u.tolist() == np.searchsorted(rid, a).tolist()
+        assert v.tolist() == np.where(b >= 0, np.searchsorted(rid, np.maximum(b, 0)),
+                                      -1).tolist()
+        assert (v == -1).sum() == (b == -1).sum()
 
 
 def test_leaves_double_until_about_two_per_bucket():

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..._distinct import distinct
+from ..._distinct import distinct, positions
 from ..._sizes import SizedByArrays
 from ..._task_graph import TaskGraph
 from .._hierarchy import events_kept, gap_evidence, midpoint_threshold, widest_gap_count
@@ -207,8 +207,7 @@ def answers(state: Pointers, questions: list) -> list:
 
 def answered(state: Pointers, questions: list, replies: list) -> Pointers:
     """One round: each unknown pointer replaced by its target's, then followed inside."""
-    asked_ids = np.concatenate(questions)
-    at = np.searchsorted(asked_ids, state.pointer[~state.known])
+    at = positions(np.concatenate(questions), state.pointer[~state.known])
     pointer, known = state.pointer.copy(), state.known.copy()
     open_ = np.flatnonzero(~known)
     pointer[open_] = np.concatenate([r[0] for r in replies])[at]

@@ -209,10 +209,20 @@ def leaf_state(g: int, pieces: list) -> _prune_groups.GroupState:
     by = _saddle_order(*sweep)[::-1]          # decreasing (value, saddle, pair)
     inside = far_leaf[by] == g
     far = far[by]
-    return _prune_groups.GroupState(
+    return _with_local(_prune_groups.GroupState(
         rid[order], key[order], young[by], near[by], np.where(inside, far, -1),
         np.where(inside, 0, far_sum[by]), np.where(inside, -1, far),
-        tuple(c[by] for c in sweep))
+        tuple(c[by] for c in sweep)))
+
+
+def _with_local(state: _prune_groups.GroupState) -> _prune_groups.GroupState:
+    """`state` with its edges' ends as places among its regions (-1 outside), found by
+    a hash table of its regions (`positions`, which this path compiles anyway)
+    instead of `GroupState.pruned`'s binary search per end: the ids are -1 or >= 0,
+    so an outside end (-1) is not among them."""
+    u, v = positions(state.rid, np.stack([state.a, state.b]))
+    state.local = (u, v)
+    return state
 
 
 def _pruned_leaf(g: int, pieces: list) -> tuple:
@@ -225,7 +235,7 @@ def _pruned_leaf(g: int, pieces: list) -> tuple:
 
 def _pruned_node(low, high) -> tuple:
     """(decided, up, the events each half passed up) of a group."""
-    decided, up = _prune_groups.GroupState.joined([low, high]).pruned()
+    decided, up = _with_local(_prune_groups.GroupState.joined([low, high])).pruned()
     return decided, up, (low.event, high.event)
 
 
