@@ -218,8 +218,8 @@ def leaf_state(g: int, pieces: list) -> _prune_groups.GroupState:
 def _with_local(state: _prune_groups.GroupState) -> _prune_groups.GroupState:
     """`state` with its edges' ends as places among its regions (-1 outside), found by
     a hash table of its regions (`positions`, which this path compiles anyway)
-    instead of `GroupState.pruned`'s binary search per end: the ids are -1 or >= 0,
-    so an outside end (-1) is not among them."""
+    instead of `GroupState.pruned`'s binary search per end. Region ids are never
+    negative, so an outside end (-1) is never among them."""
     u, v = positions(state.rid, np.stack([state.a, state.b]))
     state.local = (u, v)
     return state
