@@ -32,6 +32,9 @@ reports each run and the fastest of each case: on a shared machine the same run 
 take 25 % longer ten minutes later, so a ratio of single runs made minutes apart
 measures the machine as much as the code.
 
+Before anything is timed, each tree segments a small volume the same way
+(`warm_up`), so that the timed runs load numba's kernels instead of compiling them.
+
 ``--base REV`` also runs every case with another revision's volseg (a temporary git
 worktree first on the children's PYTHONPATH, run from the bench folder so the
 checkout's own volseg/ is not imported), interleaved with today's, and prints
@@ -187,19 +190,46 @@ def main(argv=None) -> int:
     return _main(args, {"now": None})
 
 
+#: Edge of the volume (in blocks of a third of it) that `warm_up` segments.
+WARM_UP_SIZE = 96
+
+
+def warm_up(folder: Path, trees: dict, volseg: list, in_memory: bool) -> None:
+    """Each tree's kernels compiled before anything is timed: a tree's first run
+    compiles numba's kernels into that tree's cache (the base's worktree starts
+    empty), 16-18 s of a 512^3 blockwise run of 82-100 s here, so a single run of the
+    base against a warm today measured the compilation as much as the code. A small
+    volume of the same type is segmented blockwise (and in memory, when a case runs
+    there) by each tree with the same options, untimed."""
+    start = time.perf_counter()
+    zarr_path, npy_path = write_inputs(folder, WARM_UP_SIZE, WARM_UP_SIZE // 3, in_memory)
+    for tree, path in trees.items():
+        env = {"PYTHONPATH": path} if path else None
+        out = folder / f"warm_up_{tree}"
+        run([*volseg, str(zarr_path), "--scheduler", "threads", "-o", str(out)], env=env,
+            cwd=str(folder))
+        if in_memory:
+            run([*volseg, str(npy_path), "--mask", "none", "-o", str(out)], env=env,
+                cwd=str(folder))
+        shutil.rmtree(out, ignore_errors=True)
+    print(f"kernels compiled or loaded in each tree in {time.perf_counter() - start:.1f} s",
+          flush=True)
+
+
 def _main(args, trees) -> int:
     folder = Path(args.folder)
     folder.mkdir(parents=True, exist_ok=True)
     rows = []
+    volseg = [sys.executable, "-m", "volseg", "segment", "--regions", "30", "-q", "--force",
+              "--json", "--smooth", str(args.smooth),
+              *(["--measure", args.measure] if args.measure else []),
+              *(["--field", args.field] if args.field else [])]
+    warm_up(folder, trees, volseg, any(n <= args.skip_in_memory_above for n in args.sizes))
     for n in args.sizes:
         in_memory = n <= args.skip_in_memory_above
         start = time.perf_counter()
         zarr_path, npy_path = write_inputs(folder, n, args.chunks, in_memory)
         print(f"{n}^3: inputs ready in {time.perf_counter() - start:.1f} s", flush=True)
-        volseg = [sys.executable, "-m", "volseg", "segment", "--regions", "30", "-q", "--force",
-                  "--json", "--smooth", str(args.smooth),
-                  *(["--measure", args.measure] if args.measure else []),
-                  *(["--field", args.field] if args.field else [])]
         tag = (f"_s{args.smooth:g}" if args.smooth else "") + (f"_{args.field}" if args.field
                                                                  else "")
         plain = [("in memory", "-", folder / f"mem{n}{tag}",
