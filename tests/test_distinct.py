@@ -74,6 +74,14 @@ def test_positions_numbers_unsorted_values_by_their_index_past_a_grown_table():
     np.testing.assert_array_equal(positions(values, values[at]), at)
 
 
+def test_positions_of_required_queries_refuse_a_missing_one():
+    values = np.array([7, 3, 11])
+    np.testing.assert_array_equal(positions(values, [11, 7], required="lost"), [2, 0])
+    assert positions(values, np.zeros(0, np.int64), required="lost").size == 0
+    with pytest.raises(RuntimeError, match="an id went missing"):
+        positions(values, [3, 5], required="an id went missing")
+
+
 @given(arrays(np.int64, st.integers(0, 12), elements=st.integers(-4, 6)),
        arrays(st.sampled_from([np.int32, np.int64]), st.integers(0, 12),
               elements=st.integers(-4, 6)))

@@ -238,7 +238,7 @@ def spanning_forest(keys, saddle, edge_a, edge_b, n_cells, *, ordered=False):
         batches = [_kruskal_batch(keys, saddle, edge_a, edge_b, low, parent), high]
     forest = [order[taken] for order, taken in batches]
     if ordered:
-        return np.concatenate(forest) if len(forest) > 1 else forest[0]
+        return np.concatenate(forest)
     keep = np.zeros(len(edge_a), dtype=bool)
     for edges in forest:
         keep[edges] = True

@@ -207,9 +207,8 @@ def answers(state: Pointers, questions: list) -> list:
 
 def answered(state: Pointers, questions: list, replies: list) -> Pointers:
     """One round: each unknown pointer replaced by its target's, then followed inside."""
-    at = positions(np.concatenate(questions), state.pointer[~state.known])
-    if len(at) and at.min() < 0:
-        raise RuntimeError("a region pointer's target was not asked for")
+    at = positions(np.concatenate(questions), state.pointer[~state.known],
+                   required="a region pointer's target was not asked for")
     pointer, known = state.pointer.copy(), state.known.copy()
     open_ = np.flatnonzero(~known)
     pointer[open_] = np.concatenate([r[0] for r in replies])[at]

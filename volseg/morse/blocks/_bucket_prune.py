@@ -216,12 +216,10 @@ def leaf_state(g: int, pieces: list) -> _prune_groups.GroupState:
 
 
 def _with_local(state: _prune_groups.GroupState) -> _prune_groups.GroupState:
-    """`state` with its edges' ends as places among its regions (-1 outside), found by
-    a hash table of its regions (`positions`, which this path compiles anyway)
-    instead of `GroupState.pruned`'s binary search per end. Region ids are never
-    negative, so an outside end (-1) is never among them."""
-    u, v = positions(state.rid, np.stack([state.a, state.b]))
-    state.local = (u, v)
+    """`state` with its edges' ends as places among its regions (-1 outside), by a
+    hash table (`_merge_groups.local_ends`, which this path compiles anyway) instead
+    of `GroupState.pruned`'s binary search per end."""
+    state.local = _merge_groups.local_ends(state)
     return state
 
 
@@ -249,9 +247,7 @@ def _known_keys(decided: tuple, known: tuple) -> tuple:
 def _looked_up(keys: tuple, events) -> tuple:
     """The keys of `events`, every one of which `keys` must hold."""
     event, ext, tie = keys
-    at = positions(event, events)
-    if len(at) and at.min() < 0:
-        raise RuntimeError("the pruning's tree lost the key of an event")
+    at = positions(event, events, required="the pruning's tree lost the key of an event")
     return ext[at], tie[at]
 
 

@@ -86,12 +86,19 @@ def state(rid, young, near, far, ext, tie) -> GroupState:
                       (-ext, tie))
 
 
+def local_ends(group: GroupState) -> tuple:
+    """(u, v): each edge's ends as places among the group's regions, by one hash table
+    (`positions`) for both; v is -1 where b is -1 (outside): region ids are never
+    negative, so -1 is never among them."""
+    u, v = positions(group.rid, np.stack([group.a, group.b]))
+    return u, v
+
+
 def decided(group: GroupState) -> tuple:
     """(the merges it decides, as (larger id, smaller id, extinction, pruned id); the
     `GroupState` it passes up: its undecided edges, ends named by the decided unions)."""
     rid = group.rid.astype(np.int64)
-    # One table for both ends; v is -1 where b is -1 (outside): no id is < 0.
-    u, v = positions(rid, np.stack([group.a, group.b]))
+    u, v = local_ends(group)
     ext, tie = -group.sweep[0], group.sweep[1]
     done, gone, keep, root = decide(u, v, ext, tie, len(rid))
     rest = ~done
