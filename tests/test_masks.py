@@ -256,22 +256,3 @@ def test_the_cli_says_when_the_mask_leaves_out_non_zero_voxels(tmp_path, capsys)
     assert main(["segment", str(tmp_path / "fuel.npy"), "-o", str(tmp_path / "f"),
                  "--regions", "5", "--no-vti"]) == 0
     assert "leaves out" not in capsys.readouterr().err
-
-
-@pytest.mark.parametrize("dtype", [np.uint8, np.int16, np.int64])
-def test_histogram_counted_in_slabs_counts_every_value(dtype, monkeypatch):
-    """The integer histogram is counted a slab of voxels at a time (its 8-byte offsets
-    were 24 bytes a voxel at once): the same counts as one bincount, any slab size."""
-    import volseg.masks as masks
-
-    rng = np.random.default_rng(5)
-    volume = rng.integers(-40 if dtype != np.uint8 else 0, 200, (17, 13, 11)).astype(dtype)
-    lo = int(volume.min())
-    width = int(volume.max()) - lo + 1
-    expected = np.bincount((volume.astype(np.int64) - lo).ravel(), minlength=width)
-    for slab in (7, 1000, 2**20):
-        monkeypatch.setattr(masks, "COUNT_SLAB", slab)
-        np.testing.assert_array_equal(masks._value_counts(volume, lo, width), expected)
-        np.testing.assert_array_equal(masks._value_counts(volume[:, ::2], lo, width),
-                                      np.bincount((volume[:, ::2].astype(np.int64) - lo)
-                                                  .ravel(), minlength=width))

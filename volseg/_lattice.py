@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Lattice", "MAX_LEVELS", "lattice_of", "on_lattice"]
+__all__ = ["Lattice", "MAX_LEVELS", "lattice_of", "on_lattice", "sample_stride"]
 
 #: A volume of at most this many levels on a lattice is quantised (16-bit data and
 #: narrower); more levels are a continuous field (simulations, float maps).
@@ -42,19 +42,30 @@ class Lattice:
         return f"{self.levels} levels of {self.step:.6g} from {self.low:.6g}"
 
 
+def sample_stride(shape) -> int:
+    """The stride s of the sample ``data[::s, ::s, ::s]`` of a volume of `shape`: about
+    `SAMPLE_VOXELS` voxels."""
+    return max(1, int(np.ceil((np.prod(shape, dtype=float) / SAMPLE_VOXELS) ** (1 / 3))))
+
+
 def _sample(data) -> np.ndarray:
-    stride = max(1, int(np.ceil((np.prod(data.shape, dtype=float) / SAMPLE_VOXELS) ** (1 / 3))))
+    stride = sample_stride(data.shape)
     sample = data[::stride, ::stride, ::stride]
     return np.asarray(sample.compute() if hasattr(sample, "compute") else sample)
 
 
-def lattice_of(data, value_range) -> Lattice | None:
+def lattice_of(data, value_range, *, sample=None, present=None) -> Lattice | None:
     """The lattice `data` lies on (`value_range` its (min, max)), or None: more than
-    `MAX_LEVELS` levels, or values off every lattice the sample suggests."""
+    `MAX_LEVELS` levels, or values off every lattice the sample suggests.
+
+    `sample`: ``data[::s, ::s, ::s]`` (`sample_stride`), when the caller read it
+    already; `present`: every distinct value of `data`, when known (an integer
+    volume's `volseg._census.Census.present`): the check of every voxel is then a
+    check of those values, the same answer with no pass over `data`."""
     low, high = (float(v) for v in value_range)
     if not high > low or data.dtype == bool:
         return None
-    levels = np.unique(_sample(data))
+    levels = np.unique(_sample(data) if sample is None else sample)
     if len(levels) > MAX_LEVELS or len(levels) < 2:
         return None
     offsets = levels.astype(np.float64) - low
@@ -70,7 +81,9 @@ def lattice_of(data, value_range) -> Lattice | None:
         return None
     if data.dtype.kind in "iu" and step == 1:
         return Lattice(low, step, count + 1)      # every integer is on it: no pass
-    if hasattr(data, "map_blocks"):
+    if present is not None:
+        worst = _worst(present, low, step).max()
+    elif hasattr(data, "map_blocks"):
         import dask
 
         off = data.map_blocks(_worst, low, step, dtype=np.float64, chunks=(1, 1, 1)).max()

@@ -47,6 +47,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from ._census import MAX_INTEGER_BINS, Census, value_counts, widened
+
 __all__ = ["foreground_mask", "check_rule", "MaskChoice", "AUTO_PLATEAU_SHARE",
            "AUTO_LOW_MODE_RANGE", "AUTO_OTHER_MODE_SHARE", "AUTO_BACKGROUND_SHARE",
            "AUTO_BORDER_RATIO", "MASK_RULES"]
@@ -102,7 +104,8 @@ class MaskChoice:
         return "" if self.mask is None else f" in a {self.used} mask of {self.voxels} voxels"
 
 
-def foreground_mask(volume, rule="auto", *, value_range=None, lattice=None) -> MaskChoice:
+def foreground_mask(volume, rule="auto", *, value_range=None, lattice=None,
+                    census: Census | None = None) -> MaskChoice:
     """Resolve a mask rule (or array) for `volume`; see the module docstring.
 
     Parameters
@@ -119,6 +122,10 @@ def foreground_mask(volume, rule="auto", *, value_range=None, lattice=None) -> M
         The levels a quantised `volume` lies on: ``"auto"`` and ``"otsu"`` then read
         its histogram of levels, so that every exactly scaled or offset copy of a
         volume gets the same mask (the threshold is still said in its values).
+    census : volseg._census.Census, optional
+        Of `volume`, when the caller read it (`run_stages` does): its range, plateaus
+        and (integers) histogram are taken from it, not read again. Not used with
+        `lattice`, whose rules read the lattice's integers.
 
     Returns
     -------
@@ -154,16 +161,18 @@ def foreground_mask(volume, rule="auto", *, value_range=None, lattice=None) -> M
     name, threshold = check_rule(rule)
     if lattice is not None and name in ("auto", "otsu"):
         return _on_levels(data, rule, lattice)
+    if census is not None:
+        value_range = census.value_range
     if name == "auto":
-        return _auto(data, lazy, value_range)
+        return _auto(data, lazy, value_range, census)
     if name == "nonzero":
-        lowest, at_lowest = _plateau(data, lazy)
+        lowest, at_lowest = _plateau(data, lazy, census=census)
         voxels = int(data.size - at_lowest) if lowest == lowest else 0    # NaN: none
         return _checked(MaskChoice(data > lowest, name, "nonzero", voxels))
     if name == "otsu":
         from skimage.filters import threshold_otsu
 
-        counts, centers = _histogram(data, lazy, value_range)
+        counts, centers = _histogram(data, lazy, value_range, census)
         if centers.dtype.kind in "iu":      # Otsu's class means in float64 on the offsets
             base = centers[0].item()        # from the minimum (exact: centers near 2^63
             offsets = np.arange(len(centers), dtype=np.int64)        # are 2048 apart)
@@ -220,28 +229,28 @@ def _on_levels(data, rule, lattice) -> MaskChoice:
     return MaskChoice(choice.mask, choice.rule, used, choice.voxels)
 
 
-def _auto(data, lazy: bool, value_range=None) -> MaskChoice:
+def _auto(data, lazy: bool, value_range=None, census=None) -> MaskChoice:
     """The ``"auto"`` rule of the module docstring: a plateau, a low mode, or none."""
     lowest, highest = value_range if value_range is not None else _range(data, lazy)
-    level, at_level = _plateau(data, lazy)
+    level, at_level = _plateau(data, lazy, census=census)
     if at_level > AUTO_PLATEAU_SHARE * data.size:
         return _checked(MaskChoice(data > level, "auto", "nonzero", int(data.size - at_level)))
     if lowest < 0 < highest:
-        _, at_zero = _plateau(data, lazy, 0)
+        _, at_zero = _plateau(data, lazy, 0, census=census)
         if at_zero > AUTO_PLATEAU_SHARE * data.size:
             return _checked(MaskChoice(data != 0, "auto", "value!=0", int(data.size - at_zero)))
-    threshold = _low_mode(data, lazy, lowest, highest)
+    threshold = _low_mode(data, lazy, lowest, highest, census)
     if threshold is not None:
         return _checked(MaskChoice(data > threshold, "auto", f"low mode: value>{threshold:g}", 0))
     return MaskChoice(None, "auto", "none", int(data.size))
 
 
-def _low_mode(data, lazy: bool, lowest: float, highest: float):
+def _low_mode(data, lazy: bool, lowest: float, highest: float, census=None):
     """The triangle threshold of a background that is a low mode of the histogram (the
     module docstring's rule 2), or None."""
     from scipy.ndimage import gaussian_filter1d
 
-    counts, centers = _histogram(data, lazy, (lowest, highest))
+    counts, centers = _histogram(data, lazy, (lowest, highest), census)
     smooth = gaussian_filter1d(counts.astype(np.float64), max(1.0, len(counts) / 128))
     peak = int(np.argmax(smooth))
     if centers[peak] - lowest > AUTO_LOW_MODE_RANGE * (highest - lowest):
@@ -288,9 +297,14 @@ def _range(data, lazy: bool) -> tuple:
     return data.min().item(), data.max().item()
 
 
-def _plateau(data, lazy: bool, level=None):
+def _plateau(data, lazy: bool, level=None, *, census=None):
     """The plateau's value (default the minimum) and how many voxels hold it; for a
-    Dask volume in one pass (each block's minimum and its count there, joined here)."""
+    Dask volume in one pass (each block's minimum and its count there, joined here);
+    none with a `census` that counted them (the minimum's, and 0's)."""
+    if census is not None and level is None:
+        return census.low, census.at_low
+    if census is not None and level == 0 and census.at_zero is not None:
+        return level, census.at_zero
     if not lazy:
         level = data.min() if level is None else level
         return level, int(np.count_nonzero(data == level))
@@ -309,20 +323,23 @@ def _plateau(data, lazy: bool, level=None):
     return lowest, int(counts[lows == lowest].sum())
 
 
-def _histogram(data, lazy: bool, value_range=None) -> tuple:
+def _histogram(data, lazy: bool, value_range=None, census=None) -> tuple:
     """(counts, bin centres) of the volume as scikit-image's `exposure.histogram`
     makes it (integers: one bin per value from the minimum to the maximum; floats:
     256 bins over [min, max]), summed over the blocks for a Dask volume (its
     `value_range` read first unless given). Integers spanning more than
     `MAX_INTEGER_BINS` values get the 256 bins too (scikit-image asks for one bin
-    per value up to the maximum: 2^62 of them for an int64 near 2^62)."""
+    per value up to the maximum: 2^62 of them for an int64 near 2^62). A `census`
+    with value counts gives them (the same counts, no pass)."""
     lo, hi = value_range if value_range is not None else _range(data, lazy)
     if data.dtype.kind in "biu" and int(hi) - int(lo) < MAX_INTEGER_BINS:
         width = int(hi) - int(lo) + 1
+        if census is not None and census.counts is not None and census.low == lo:
+            return census.counts, _value_centers(data.dtype, lo, width)
         if not lazy:
-            return _value_counts(data, lo, width), _value_centers(data.dtype, lo, width)
+            return value_counts(data, lo, width), _value_centers(data.dtype, lo, width)
         counts = data.map_blocks(
-            lambda b: _value_counts(b, lo, width)[None, None, None], dtype=np.int64,
+            lambda b: value_counts(b, lo, width)[None, None, None], dtype=np.int64,
             chunks=((1,) * data.numblocks[0], (1,) * data.numblocks[1],
                     (1,) * data.numblocks[2], (width,)), new_axis=3)
         return _compute(counts.sum(axis=(0, 1, 2))), _value_centers(data.dtype, lo, width)
@@ -339,34 +356,8 @@ def _histogram(data, lazy: bool, value_range=None) -> tuple:
     return counts, (edges[:-1] + edges[1:]) / 2
 
 
-#: Integer volumes spanning fewer values than this get one histogram bin per value.
-MAX_INTEGER_BINS = 2**20
-
-
-def _integers(block):
-    """An integer block in a type where ``block - lo`` cannot overflow for a span
-    under `MAX_INTEGER_BINS` (64-bit types as they are: the span is small)."""
-    block = np.asarray(block)
-    return block if block.dtype.itemsize == 8 else block.astype(np.int64)
-
-
-#: Voxels counted at a time by `_value_counts`: its offsets are 8 bytes a voxel, so the
-#: whole volume's at once were 24 bytes a voxel beside it (the peak of a default run).
-COUNT_SLAB = 2**20
-
-
-def _value_counts(block, lo, width):
-    flat = np.asarray(block).reshape(-1)
-    counts = np.zeros(width, dtype=np.intp)
-    for start in range(0, flat.size, COUNT_SLAB):
-        part = _integers(flat[start:start + COUNT_SLAB])
-        counts += np.bincount((part - part.dtype.type(lo)).astype(np.intp, copy=False),
-                              minlength=width)
-    return counts
-
-
 def _value_centers(dtype, lo, width):
-    kind = _integers(np.zeros(0, dtype)).dtype
+    kind = widened(np.zeros(0, dtype)).dtype
     return np.arange(width, dtype=kind) + kind.type(lo)
 
 

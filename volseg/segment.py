@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 from . import _validate
 from ._block_hooks import BlockHooks
 from ._block_hooks import compute as _compute
+from ._census import census as _census
 from ._distinct import counts
 from ._lattice import lattice_of, on_lattice
 from ._smoothing import gaussian, noise_sigma
@@ -452,7 +453,8 @@ def run_stages(data, request: SegmentRequest, storage: Storage | None = None, *,
         raise ValueError(f"{source} holds booleans (a mask or a label map?), not an image "
                          "to segment; cast it (astype(numpy.uint8)) if that is what you mean")
     raw = data                                       # values as read: the mask's rules
-    value_range = input_range(data)                  # one pass, before anything is kept
+    read = _census(data)                             # one pass, before anything is kept
+    value_range = read.value_range
     if not all(np.isfinite(v) for v in value_range):
         raise ValueError(f"{source} holds NaN or infinite values (its range is "
                          f"{value_range[0]} .. {value_range[1]}); replace them first")
@@ -462,12 +464,13 @@ def run_stages(data, request: SegmentRequest, storage: Storage | None = None, *,
                          f"`smooth_sigma`) is wider than {source} "
                          f"({widest} voxels along its longest axis): it would blur it to "
                          f"one value; use at most {widest}")
-    data, shifted_range, lattice = _as_computed(data, value_range)
+    data, shifted_range, lattice = _as_computed(data, value_range, read)
     # A mask rule reads the histogram of levels, unless the values are those levels
     # already (integers of step 1: the same histogram, as before the lattice).
     levels = None if lattice is None or (raw.dtype.kind in "iu" and lattice.step == 1) \
         else lattice
-    choice = foreground_mask(raw, request.mask, value_range=value_range, lattice=levels)
+    choice = foreground_mask(raw, request.mask, value_range=value_range, lattice=levels,
+                             census=read if levels is None else None)
     request = request.with_smoothing(data, choice.mask, lattice)
     storage.begin(choice, request)
     hooks = storage.block_hooks       # set by `begin` (the blockwise work folder's)
@@ -606,13 +609,16 @@ def _default_scale(values, request, value_range, source) -> float:
                          "one (value_scale, --value-scale)") from None
 
 
-def _as_computed(data, value_range) -> tuple:
+def _as_computed(data, value_range, read) -> tuple:
     """(data, its range, lattice) as the stages compute on it: a quantised volume as
     its lattice integers (`volseg._lattice`: every exactly scaled or offset copy the
     same numbers, docs/design.md section 13), 64-bit integers beyond 2^53 as offsets
-    (`_exact_in_float64`), anything else as it is (lattice None)."""
-    data, value_range = _exact_in_float64(data, value_range)
-    lattice = lattice_of(data, value_range)
+    (`_exact_in_float64`), anything else as it is (lattice None). `read`: the
+    `volseg._census.Census` of `data` (its lattice sample and distinct values)."""
+    shifted, value_range = _exact_in_float64(data, value_range)
+    lattice = (lattice_of(data, value_range, sample=read.sample, present=read.present())
+               if shifted is data else lattice_of(shifted, value_range))
+    data = shifted
     if lattice is None:
         return data, value_range, None
     if data.dtype.kind in "iu" and lattice.step == 1 and lattice.low == 0:
