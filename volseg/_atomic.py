@@ -5,11 +5,12 @@ while writing leaves no partial file under the final name."""
 from __future__ import annotations
 
 import os
+import shutil
 import tempfile
 import threading
 from pathlib import Path
 
-__all__ = ["write_atomically", "temporary_beside", "file_identity"]
+__all__ = ["write_atomically", "temporary_beside", "file_identity", "remove_tree"]
 
 
 def temporary_beside(path) -> Path:
@@ -51,6 +52,39 @@ def write_atomically(path, save, *args, durable: bool = False, **kwargs) -> None
         except OSError:
             pass
         raise
+
+
+#: `remove_tree` unlinks a tree's files in threads from this many files up.
+_PARALLEL_FROM = 16
+
+
+def remove_tree(path) -> None:
+    """``shutil.rmtree(path, ignore_errors=True)``, its files unlinked by several
+    threads first when there are many: what a blockwise run leaves (its work folder,
+    moved into the committed set's staging folder) is thousands of block files of
+    16-32 MB, and the kernel frees each one's pages as it is unlinked (`unlink`
+    releases the GIL). 4 GB in 512 files: 0.35 s against 0.60 one by one, here (2
+    cores); the commit of a 512^3 run waited 1.4 s for it, its last serial step. A
+    link is removed, never followed (``os.walk`` lists a link to a folder among the
+    folders and does not enter it; ``shutil.rmtree`` then removes it as a link); a
+    link at `path` itself is left, as ``shutil.rmtree`` leaves it."""
+    path = os.fspath(path)
+    if not os.path.islink(path):
+        files = [os.path.join(top, name)
+                 for top, _, names in os.walk(path, followlinks=False) for name in names]
+        if len(files) >= _PARALLEL_FROM:
+            from concurrent.futures import ThreadPoolExecutor
+
+            with ThreadPoolExecutor(min(8, os.cpu_count() or 1)) as pool:
+                list(pool.map(_unlink, files, chunksize=8))
+    shutil.rmtree(path, ignore_errors=True)
+
+
+def _unlink(path: str) -> None:
+    try:
+        os.unlink(path)
+    except OSError:                   # gone already, or not ours to remove: rmtree's call
+        pass
 
 
 #: CPython 3.11's AST constructor keeps one recursion depth per interpreter, so two

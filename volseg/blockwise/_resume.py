@@ -28,12 +28,11 @@ import hashlib
 import json
 import math
 import os
-import shutil
 from pathlib import Path
 
 import numpy as np
 
-from .._atomic import NPY_READ_LOCK, file_identity, write_atomically
+from .._atomic import NPY_READ_LOCK, file_identity, remove_tree, write_atomically
 
 __all__ = ["WorkFolder"]
 
@@ -50,7 +49,7 @@ class WorkFolder:
         if not same:
             if self.folder.is_symlink():              # a link is removed, never followed
                 self.folder.unlink()
-            shutil.rmtree(self.folder, ignore_errors=True)
+            remove_tree(self.folder)                  # another run's blocks
             self.folder.mkdir(parents=True)
             temporary = stored.with_suffix(".tmp")
             temporary.write_text(json.dumps(self.key, indent=1))
@@ -78,7 +77,7 @@ class WorkFolder:
                              dtype=dtype, meta=np.empty((0,) * len(chunks), dtype))
 
     def remove(self):
-        shutil.rmtree(self.folder, ignore_errors=True)
+        remove_tree(self.folder)
         _forget(self.folder)
 
 

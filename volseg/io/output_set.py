@@ -27,13 +27,12 @@ import errno
 import json
 import os
 import re
-import shutil
 import stat
 import tempfile
 import time
 from pathlib import Path
 
-from .._atomic import file_identity
+from .._atomic import file_identity, remove_tree
 from ..errors import OutputError  # noqa: F401 (re-exported)
 
 __all__ = ["OutputSet", "OutputError", "FolderLock", "recover", "committing", "read_set"]
@@ -206,7 +205,7 @@ def _remove(path: Path):
     except FileNotFoundError:
         return
     if stat.S_ISDIR(mode):
-        shutil.rmtree(path, ignore_errors=True)
+        remove_tree(path)
     else:
         path.unlink(missing_ok=True)
 
@@ -251,7 +250,7 @@ def recover(folder, stem: str) -> list[str]:
                         f"{len(journal['names'])} files")
         else:
             done.append(f"{staging.name}: removed the staging of an interrupted run")
-        shutil.rmtree(staging, ignore_errors=True)
+        remove_tree(staging)
     return done
 
 
@@ -375,7 +374,7 @@ class OutputSet:
         try:
             for staging in _stagings(self.folder, self.stem) if self._lock.held else ():
                 if _real_dir(staging) and not os.path.lexists(staging / _JOURNAL):
-                    shutil.rmtree(staging, ignore_errors=True)
+                    remove_tree(staging)
         except OSError:     # the folder gone or unreadable: nothing of ours to remove
             pass
         finally:
@@ -427,7 +426,7 @@ class OutputSet:
             _fsync(staging)
             self._swap(staging)
         finally:
-            shutil.rmtree(staging, ignore_errors=True)
+            remove_tree(staging)            # the old set and the work folder: many files
         return dict(self.targets)
 
     def _in_order(self) -> list[Path]:
