@@ -382,6 +382,10 @@ class Storage:
 
     #: `BlockHooks` for the blockwise stages (None: plain Dask, or numpy).
     block_hooks: BlockHooks | None = None
+    #: (min, max) of the values `smoothed` returned, when it saw every block of them as
+    #: it kept them (the blockwise storage); None: not known, and the default value
+    #: scale takes a pass over them.
+    smoothed_range: tuple[float, float] | None = None
 
     def begin(self, choice: MaskChoice, request: SegmentRequest) -> None:
         """Called once the mask and the smoothing are resolved, before any stage runs."""
@@ -481,7 +485,8 @@ def run_stages(data, request: SegmentRequest, storage: Storage | None = None, *,
         values = storage.smoothed(gaussian(data, request.smooth_sigma, margin=0 if lazy else 1))
         scale = request.value_scale
         if scale is None and entry.needs_scale:
-            scale = _default_scale(values, request, shifted_range, source)
+            scale = _default_scale(values, request, shifted_range, source,
+                                   storage.smoothed_range)
         # A smoothed copy in memory is the stages' own: the field may overwrite it.
         field = entry.make(values, shifted_range, request, scale, hooks, choice.mask,
                            owned=values is not data and not lazy)
@@ -596,13 +601,15 @@ def _timed(timings: dict, stage: str, storage: Storage | None = None):
     timings[stage] = timings.get(stage, 0.0) + time.perf_counter() - start
 
 
-def _default_scale(values, request, value_range, source) -> float:
+def _default_scale(values, request, value_range, source, smoothed_range=None) -> float:
     """`default_value_scale` of the (smoothed) values, or a message naming the values'
-    range when none is finite (denormal or astronomically large values)."""
+    range when none is finite (denormal or astronomically large values). The range
+    is the input's, or with smoothing `smoothed_range` (`Storage.smoothed_range`);
+    without it, a pass over the smoothed values."""
     try:
         return _validate.value_scale(default_value_scale(
             values, request.spacing,
-            value_range=None if request.smooth_sigma else value_range))
+            value_range=smoothed_range if request.smooth_sigma else value_range))
     except ValueError:
         raise ValueError(f"{source}: its values span {value_range[0]:g} .. {value_range[1]:g}, "
                          "too narrow or too wide a range for a default value scale; give "

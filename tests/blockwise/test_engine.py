@@ -66,15 +66,15 @@ def test_bad_engine_arguments_and_an_unreachable_scheduler(tmp_path, volume, cap
     assert dask.config.get("scheduler", None) in (None, "synchronous", "sync")
 
 
-def _whole_and_interrupted(tmp_path, volume, monkeypatch, stage_function):
-    """Segment `volume` blockwise (27 blocks) once whole, then again into ``out`` with
-    Ctrl-C in `_morse_blocks.<stage_function>` after 5 blocks; returns (argv, the whole
-    run's labels, out), with the function restored."""
+def _whole_and_interrupted(tmp_path, volume, monkeypatch, stage_function, options=()):
+    """Segment `volume` blockwise (27 blocks; `options` added) once whole, then again
+    into ``out`` with Ctrl-C in `_morse_blocks.<stage_function>` after 5 blocks;
+    returns (argv, the whole run's labels, out), with the function restored."""
     from volseg.morse.blocks import _build as _morse_blocks
 
     np.save(tmp_path / "vol.npy", volume)
     argv = ["segment", str(tmp_path / "vol.npy"), "--chunks", "8", "--mask", "none",
-            "--scheduler", "threads", "--workers", "1", "-q"]
+            "--scheduler", "threads", "--workers", "1", *options, "-q"]
     assert main([*argv, "-o", str(tmp_path / "whole")]) == 0
     expected = zarr.open(str(tmp_path / "whole" / "vol_labels.zarr"), mode="r")[:]
     assert not (tmp_path / "whole" / ".vol.volseg-work").exists()     # removed once committed
@@ -108,6 +108,43 @@ def test_a_run_killed_in_the_cells_pass_resumes_from_the_kept_path_ends(tmp_path
     assert main([*argv, "-o", str(out)]) == 0
     assert climbs == []                        # no block climbs again: its ends were kept
     assert np.array_equal(zarr.open(str(out / "vol_labels.zarr"), mode="r")[:], expected)
+
+
+@pytest.mark.slow
+def test_the_smoothed_range_is_taken_as_the_blocks_are_kept(tmp_path, volume, monkeypatch):
+    """A smoothed blockwise run's default value scale reads the range its storage took
+    as it kept the smoothed blocks, not a pass over them again: the same range as the
+    smoothed values in memory, so the in-memory scale and labels. A run resumed with
+    every smoothed block on disk sees none of them pass and takes the pass."""
+    import json
+
+    import dask
+
+    from volseg import segment as _segment
+
+    ranges, real = [], _segment.default_value_scale
+
+    def recorded(values, spacing, *, value_range=None):
+        # the range given, and that of the values given (a pass, for the test)
+        ranges.append((value_range, tuple(float(v) for v in dask.compute(
+            values.min(), values.max()))))
+        return real(values, spacing, value_range=value_range)
+
+    monkeypatch.setattr(_segment, "default_value_scale", recorded)
+    argv, expected, out = _whole_and_interrupted(tmp_path, volume, monkeypatch,
+                                                 "_pairs_of_block", ["--smooth", "1"])
+    assert main(["segment", str(tmp_path / "vol.npy"), "--mask", "none", "--smooth", "1",
+                 "-q", "-o", str(tmp_path / "memory")]) == 0
+    (whole, whole_range), (killed, _), (memory, memory_range) = ranges
+    assert whole == killed == whole_range == memory_range and memory is None
+    summaries = [json.loads((folder / "vol_summary.json").read_text())
+                 for folder in (tmp_path / "whole", tmp_path / "memory")]
+    assert summaries[0]["value_scale"] == summaries[1]["value_scale"]
+    assert main([*argv, "-o", str(out)]) == 0                   # resumed: every block kept
+    assert ranges[-1] == (None, whole_range)                    # so the pass is taken
+    assert np.array_equal(zarr.open(str(out / "vol_labels.zarr"), mode="r")[:], expected)
+    assert json.loads((out / "vol_summary.json").read_text())["value_scale"] == \
+        summaries[0]["value_scale"]
 
 
 @pytest.mark.slow

@@ -10,8 +10,8 @@ before from disk instead, inside the output set's staging folder:
    input); then the free disk is checked (`DISK_BYTES_PER_VOXEL`);
 1. the input's min and max (one pass: the value scale and the preview's grey scale);
    with smoothing, the smoothed volume, block by block into the work folder below
-   (8 bytes per voxel on disk until the outputs are committed), and its own min and
-   max for the value scale;
+   (8 bytes per voxel on disk until the outputs are committed), its own min and max
+   for the value scale taken as each block is kept;
 2. the curvature, block by block with its halo, written to ``<stem>_curvature.zarr``
    (float64, so that the Morse stage reads exactly what it would in memory), each
    block also kept in the work folder below, uncompressed: the later stages read it
@@ -132,14 +132,23 @@ class BlockwiseStorage(Storage):
         self.kept.add(stage)
         return self.work.wrap(stage, function)
 
-    def _store(self, stage: str, blocks):
+    def _store(self, stage: str, blocks, *, extremes: bool = False):
         """Blocks wrapped by ``work.wrap(stage, ...)``, computed once into the work
-        folder (each block saved by its wrap), then read back from it."""
+        folder (each block saved by its wrap), then read back from it. `extremes`:
+        returns also the blocks' (min, max), taken as each is kept, or None when every
+        block was on disk already (a resumed run: nothing passed through)."""
+        found = None
         if self.work.finished(stage) < blocks.npartitions:
-            self._run(blocks.map_blocks(_nothing, dtype=bool,
-                                        chunks=tuple((1,) * len(c) for c in blocks.chunks)),
-                      stage=_STORED_TITLES.get(stage, stage))
-        return self.work.array(stage, blocks.chunks, blocks.dtype)
+            each = (blocks.map_blocks(_extremes, dtype=np.float64, chunks=(
+                *((1,) * len(c) for c in blocks.chunks[:-1]), (2,) * len(blocks.chunks[-1])))
+                if extremes else
+                blocks.map_blocks(_nothing, dtype=bool,
+                                  chunks=tuple((1,) * len(c) for c in blocks.chunks)))
+            (done,) = self._run(each, stage=_STORED_TITLES.get(stage, stage))
+            if extremes:
+                found = float(done[..., 0::2].min()), float(done[..., 1::2].max())
+        stored = self.work.array(stage, blocks.chunks, blocks.dtype)
+        return (stored, found) if extremes else stored
 
     def smoothed(self, values):
         # Smoothed once, into the work folder: the value scale and the curvature read
@@ -148,8 +157,12 @@ class BlockwiseStorage(Storage):
         if not self.request.smooth_sigma:
             return values
         self.say(f"smoothing, sigma {self.request.smooth_sigma:g} voxels, block by block")
-        return self._store("smoothed", values.map_blocks(self.work.wrap("smoothed", _same),
-                                                         dtype=values.dtype))
+        # Their range (the value scale's) is taken as the blocks are kept: the pass
+        # that read them all back for it took 2.4 s of a 1024^3 run.
+        smoothed, self.smoothed_range = self._store(
+            "smoothed", values.map_blocks(self.work.wrap("smoothed", _same), dtype=values.dtype),
+            extremes=True)
+        return smoothed
 
     def curvature(self, field):
         # The Morse stage and the writers read the field again and again (each pass,
@@ -228,6 +241,13 @@ def _check_disk(folder, work_folder, voxels: int, smooth: float, say, paraview=F
 def _same(block, block_id=None):
     """A block as it is (its wrap keeps it in the work folder)."""
     return block
+
+
+def _extremes(block):
+    """A block's (min, max) in float64 (exact for every input type volseg smooths
+    to), shaped as one element of each axis but the last, which holds the two."""
+    return np.array([block.min(), block.max()], dtype=np.float64).reshape(
+        (1,) * (block.ndim - 1) + (2,))
 
 
 def _nothing(block):
