@@ -114,8 +114,9 @@ def test_a_run_killed_in_the_cells_pass_resumes_from_the_kept_path_ends(tmp_path
 def test_the_smoothed_range_is_taken_as_the_blocks_are_kept(tmp_path, volume, monkeypatch):
     """A smoothed blockwise run's default value scale reads the range its storage took
     as it kept the smoothed blocks, not a pass over them again: the same range as the
-    smoothed values in memory, so the in-memory scale and labels. A run resumed with
-    every smoothed block on disk sees none of them pass and takes the pass."""
+    smoothed values in memory, so the in-memory value scale. A run resumed with every
+    smoothed block on disk sees none of them pass, takes the pass, and gives the whole
+    run's labels and scale."""
     import json
 
     import dask
